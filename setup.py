@@ -41,6 +41,10 @@ setup(
     entry_points={
         'console_scripts': [
             'mv3dpose = mv3dpose_ros.cli:main',
+            'pose2d_node = mv3dpose_ros.nodes.pose2d_node:main',
+            'fusion_node = mv3dpose_ros.nodes.fusion_node:main',
+            'bringup = mv3dpose_ros.nodes.bringup:main',
+            'image_publisher = mv3dpose_ros.nodes.image_publisher:main',
             'roundtrip_probe = mv3dpose_ros.nodes.roundtrip_probe:main',
         ],
     },

@@ -1,0 +1,74 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Data types shared by the fusion core, the ROS adapters and the offline tools.
+
+Conventions: 2D poses are ``[P, J, 3]`` arrays of (x px, y px, confidence) in raw (distorted)
+image pixels; 3D joints are metres in the world frame (z up) with NaN where a joint is missing.
+NaN never leaves the core: the ROS and file adapters turn it into explicit validity fields.
+"""
+
+from dataclasses import dataclass, field
+import enum
+from typing import Tuple
+
+import numpy as np
+
+
+class TrackState(enum.IntEnum):
+    """Track life cycle; values equal the constants of mv3dpose_msgs/TrackedSkeleton."""
+
+    TENTATIVE = 0
+    CONFIRMED = 1
+    COASTING = 2
+    DELETED = 3
+
+
+class JointState(enum.IntEnum):
+    """Per-joint validity; values equal the constants of mv3dpose_msgs/Joint3D."""
+
+    MISSING = 0
+    TRIANGULATED = 1
+    PREDICTED = 2
+
+
+@dataclass
+class Track:
+    """One tracked person as output by ``Fusion.step`` for one synchronised set of views."""
+
+    track_id: int
+    state: TrackState
+    joints: np.ndarray                 # [J, 3] metres, NaN where joint_state == MISSING
+    confidence: np.ndarray             # [J] in [0, 1]
+    joint_state: np.ndarray            # [J] uint8, JointState values
+    num_views: np.ndarray              # [J] uint8, cameras that contributed this cycle
+    reprojection_error: np.ndarray     # [J] px, NaN when not triangulated this cycle
+    position: np.ndarray               # [3] root (hip midpoint) metres, NaN if unknown
+    velocity: np.ndarray               # [3] root velocity m/s, NaN if unknown
+    first_seen: float                  # stamp [s] of the set that created the track
+    last_observed: float               # stamp [s] of the last set that updated it
+    age: int = 0                       # updates with observations
+    missed: int = 0                    # consecutive sets without association
+    score: float = 0.0                 # track confidence [0, 1]
+    source_cameras: Tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints of the layout."""
+        return int(self.joints.shape[0])
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Boolean mask ``[J]`` of joints with a usable position."""
+        return self.joint_state != JointState.MISSING
