@@ -38,7 +38,7 @@ def shared_data():
 
 @pytest.fixture
 def ros_context():
-    """An initialised rclpy context of its own, shut down after the test."""
+    """Provide an initialised rclpy context of its own, shut down after the test."""
     rclpy = pytest.importorskip('rclpy')
     ctx = rclpy.Context()
     rclpy.init(context=ctx)

@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Conversions between the core's numpy arrays / ``Track`` objects and ``mv3dpose_msgs``.
+"""
+Conversions between the core's numpy arrays / ``Track`` objects and ``mv3dpose_msgs``.
 
 The one place where NaN (the core's "missing") becomes explicit validity (``confidence == 0``,
 ``Joint3D.MISSING``, ``velocity_valid``), so no published field ever carries NaN or inf.
@@ -62,7 +63,8 @@ def sec_to_stamp(sec: float) -> Time:
 
 def person2d_array_to_numpy(msg: Person2DArray,
                             num_joints: Optional[int] = None) -> np.ndarray:
-    """Return the people of ``msg`` as a ``[P, J, 3]`` float64 array (x px, y px, confidence).
+    """
+    Return the people of ``msg`` as a ``[P, J, 3]`` float64 array (x px, y px, confidence).
 
     Raises ``InvalidMessage`` for a keypoint count that differs between people or from
     ``num_joints``, for NaN/inf values, and for confidences outside [0, 1]. Keypoints with
@@ -94,7 +96,8 @@ def numpy_to_person2d_array(poses: np.ndarray, header: Header, camera_id: str,
                             image_width: int, image_height: int, layout: str,
                             boxes: Optional[np.ndarray] = None,
                             scores: Optional[np.ndarray] = None) -> Person2DArray:
-    """Build a ``Person2DArray`` from ``[P, J, 3]`` poses; NaN or missing joints get conf 0.
+    """
+    Build a ``Person2DArray`` from ``[P, J, 3]`` poses; NaN or missing joints get conf 0.
 
     ``boxes`` are ``[P, 4]`` (x0, y0, x1, y1) pixels; when absent the box of the visible
     keypoints is used. ``scores`` default to the mean keypoint confidence.
