@@ -12,4 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""eval package."""
+"""
+Evaluation metrics: PCP3D (10-part and 8-limb), MPJPE, CLEAR MOT / IDF1.
+
+Modules: :mod:`.pcp`, :mod:`.mpjpe`, :mod:`.mot`. All distances are metres; missing joints
+are NaN.
+"""
