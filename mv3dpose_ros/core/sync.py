@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""N-stream synchroniser: groups per-camera messages by capture stamp (no rclpy).
+"""
+N-stream synchroniser: groups per-camera messages by capture stamp (no rclpy).
 
 ``message_filters.ApproximateTimeSynchronizer`` searches all combinations (exponential in the
 number of cameras), never emits a set with a camera missing and reports no drops, so it does
@@ -122,7 +123,7 @@ class CameraSyncStats:
 
     @property
     def offset_jitter_s(self) -> float:
-        """Standard deviation of the offsets (NaN before any use)."""
+        """Return the standard deviation of the offsets (NaN before any use)."""
         n = len(self.offsets_ns)
         if n == 0:
             return math.nan
@@ -160,7 +161,8 @@ class StreamSynchronizer:
     # --- public API ------------------------------------------------------------------------
 
     def add(self, camera_id: str, stamp_ns: int, msg: Any) -> AddResult:
-        """Buffer one message; return the sets it completed (oldest first).
+        """
+        Buffer one message; return the sets it completed (oldest first).
 
         Raises ``ValueError`` for an unknown camera id or a non-positive stamp: callers
         validate those first (they are configuration or driver errors, not timing).
