@@ -1,0 +1,263 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Read OpenPose JSON detections: one folder per camera, one file per frame.
+
+Each file holds ``{"people": [{"pose_keypoints_2d": [x, y, c, ...]}, ...]}`` in raw image
+pixels (OpenPose's own ``--write_json`` output, also what Pose2Sim reads). A joint with
+confidence 0 (OpenPose writes ``0, 0, 0``) is missing. Files of different cameras belong to the
+same frame when the frame number in their names is equal: the last run of digits of the file
+stem, e.g. ``cam01.0042.json`` and ``video_000000000042_keypoints.json`` are both frame 42.
+
+Per camera and frame, a missing file means the camera saw no one (an empty ``[0, J, 3]``
+array); a malformed file is reported (file name and reason) and skipped, the camera then
+counts as absent for that frame. Nothing here raises on bad file contents.
+"""
+
+from dataclasses import dataclass
+import json
+import logging
+import math
+import os
+import re
+from typing import Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+_KEYS = ('pose_keypoints_2d', 'pose_keypoints')   # the second one: OpenPose < 1.2
+_DIGITS = re.compile(r'(\d+)')
+
+
+class OpenPoseFormatError(ValueError):
+    """A file that is not valid OpenPose JSON; the message names the reason."""
+
+
+@dataclass(frozen=True)
+class FileIssue:
+    """A file that was skipped, and why."""
+
+    path: str
+    reason: str
+
+    def __str__(self) -> str:
+        """Return 'path: reason'."""
+        return f'{self.path}: {self.reason}'
+
+
+def frame_number(filename: str) -> Optional[int]:
+    """Return the frame number of a file name (last digit run of its stem), or None."""
+    stem = os.path.basename(filename)
+    if stem.lower().endswith('.json'):
+        stem = stem[:-5]
+    runs = _DIGITS.findall(stem)
+    return int(runs[-1]) if runs else None
+
+
+def parse_openpose(data: object, num_joints: Optional[int] = None) -> np.ndarray:
+    """
+    Turn a decoded OpenPose JSON object into ``[P, J, 3]`` (x px, y px, confidence).
+
+    People with an empty keypoint list are dropped (OpenPose writes those); non-finite values
+    make the joint missing. Raises :class:`OpenPoseFormatError` naming what is wrong.
+    """
+    if not isinstance(data, dict):
+        raise OpenPoseFormatError(f'top level is {type(data).__name__}, expected an object')
+    people = data.get('people')
+    if people is None:
+        raise OpenPoseFormatError('no "people" list')
+    if not isinstance(people, list):
+        raise OpenPoseFormatError(f'"people" is {type(people).__name__}, expected a list')
+    poses = []
+    for k, person in enumerate(people):
+        if not isinstance(person, dict):
+            raise OpenPoseFormatError(f'people[{k}] is {type(person).__name__}, not an object')
+        key = next((key for key in _KEYS if key in person), None)
+        if key is None:
+            raise OpenPoseFormatError(f'people[{k}] has no "pose_keypoints_2d"')
+        values = person[key]
+        if not isinstance(values, list):
+            raise OpenPoseFormatError(f'people[{k}].{key} is not a list')
+        if not values:
+            continue
+        if len(values) % 3:
+            raise OpenPoseFormatError(
+                f'people[{k}].{key} has {len(values)} values, not a multiple of 3 (x, y, c)')
+        if num_joints is not None and len(values) != 3 * num_joints:
+            raise OpenPoseFormatError(
+                f'people[{k}].{key} has {len(values) // 3} joints, the layout has {num_joints}')
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+            raise OpenPoseFormatError(f'people[{k}].{key} holds non-numeric values')
+        poses.append(values)
+    if not poses:
+        return np.zeros((0, num_joints or 0, 3))
+    lengths = {len(p) for p in poses}
+    if len(lengths) > 1:
+        raise OpenPoseFormatError(f'people have different joint counts: '
+                                  f'{sorted(n // 3 for n in lengths)}')
+    arr = np.asarray(poses, dtype=float).reshape(len(poses), -1, 3)
+    bad = ~np.isfinite(arr).all(-1) | (arr[..., 2] <= 0)
+    arr[bad] = 0.0
+    return arr
+
+
+def _read(path: str, num_joints: Optional[int]) -> np.ndarray:
+    """Read one file; OpenPoseFormatError carries the reason only."""
+    try:
+        with open(path, 'rb') as f:
+            raw = f.read()
+        data = json.loads(raw.decode('utf-8'),
+                          parse_constant=lambda c: math.nan)   # NaN/Infinity -> missing
+    except OSError as e:
+        raise OpenPoseFormatError(f'cannot read ({e.strerror or e})') from None
+    except UnicodeDecodeError:
+        raise OpenPoseFormatError('not UTF-8 text') from None
+    except json.JSONDecodeError as e:
+        raise OpenPoseFormatError(f'invalid JSON ({e.msg} at line {e.lineno} '
+                                  f'column {e.colno})') from None
+    return parse_openpose(data, num_joints)
+
+
+def read_openpose_file(path: str, num_joints: Optional[int] = None) -> np.ndarray:
+    """Read one OpenPose JSON file as ``[P, J, 3]``; OpenPoseFormatError names path and reason."""
+    try:
+        return _read(path, num_joints)
+    except OpenPoseFormatError as e:
+        raise OpenPoseFormatError(f'{path}: {e}') from None
+
+
+def index_folder(folder: str, issues: Optional[List[FileIssue]] = None) -> Dict[int, str]:
+    """
+    Map frame number -> file path for the ``*.json`` files of ``folder``.
+
+    Files without a frame number, and the second of two files with the same number, are
+    reported in ``issues`` and left out.
+    """
+    issues = issues if issues is not None else []
+    out: Dict[int, str] = {}
+    for name in sorted(os.listdir(folder)):
+        if not name.lower().endswith('.json'):
+            continue
+        path = os.path.join(folder, name)
+        if not os.path.isfile(path):
+            continue
+        n = frame_number(name)
+        if n is None:
+            issues.append(FileIssue(path, 'no frame number in the file name'))
+        elif n in out:
+            issues.append(FileIssue(path, f'frame {n} already read from '
+                                          f'{os.path.basename(out[n])}'))
+        else:
+            out[n] = path
+    return out
+
+
+class OpenPoseSequence:
+    """
+    Frames of OpenPose detections from several cameras, matched by frame number.
+
+    ``folders`` maps camera name -> folder. Iterating yields ``(frame, views)`` for every frame
+    number found in any folder, in increasing order, where ``views`` maps camera name ->
+    ``[P, J, 3]`` (empty for a missing file; malformed files leave the camera out and are
+    appended to :attr:`issues` and logged).
+    """
+
+    def __init__(self, folders: Mapping[str, str], num_joints: Optional[int] = None):
+        """Index the folders (only file names are read here)."""
+        self.num_joints = num_joints
+        self.issues: List[FileIssue] = []
+        self.files: Dict[str, Dict[int, str]] = {}
+        for cam, folder in folders.items():
+            if not os.path.isdir(folder):
+                raise FileNotFoundError(f'camera {cam!r}: folder {folder} does not exist')
+            self.files[cam] = index_folder(folder, self.issues)
+        for issue in self.issues:
+            logger.warning('skipped %s', issue)
+        self.frames: List[int] = sorted(set().union(*(f.keys() for f in self.files.values())))
+
+    def __len__(self) -> int:
+        """Return the number of frames."""
+        return len(self.frames)
+
+    def read(self, frame: int) -> Dict[str, np.ndarray]:
+        """Return the views of one frame number."""
+        views: Dict[str, np.ndarray] = {}
+        for cam, files in self.files.items():
+            path = files.get(frame)
+            if path is None:
+                views[cam] = np.zeros((0, self.num_joints or 0, 3))
+                continue
+            try:
+                views[cam] = _read(path, self.num_joints)
+            except OpenPoseFormatError as e:
+                issue = FileIssue(path, str(e))
+                self.issues.append(issue)
+                logger.warning('skipped %s', issue)
+        return views
+
+    def __iter__(self) -> Iterator[Tuple[int, Dict[str, np.ndarray]]]:
+        """Yield ``(frame, views)`` in frame order."""
+        for frame in self.frames:
+            yield frame, self.read(frame)
+
+
+def _normalise(name: str) -> str:
+    """Reduce a camera or folder name to a comparable key: 'cam01_json' == 'Cam_1' -> 'cam1'."""
+    name = name.lower()
+    for suffix in ('_json', '-json', '.json', '_openpose', '_pose'):
+        if name.endswith(suffix):
+            name = name[:-len(suffix)]
+    name = re.sub(r'[^a-z0-9]', '', name)
+    return re.sub(r'\d+', lambda m: str(int(m.group())), name)
+
+
+def match_camera_folders(root: str, cameras: Sequence[str]) -> Tuple[Dict[str, str], List[str]]:
+    """
+    Find the folder of each camera under ``root``.
+
+    A folder named exactly like the camera wins; otherwise names are compared loosely, so
+    Pose2Sim's ``cam01_json`` is camera ``cam_01``. Returns ``(camera -> folder, messages)``
+    where messages name cameras without a folder; ambiguous matches raise ValueError listing
+    the candidates.
+    """
+    if not os.path.isdir(root):
+        raise FileNotFoundError(f'poses root {root} is not a folder')
+    subdirs = sorted(d for d in os.listdir(root) if os.path.isdir(os.path.join(root, d)))
+    found: Dict[str, str] = {}
+    missing: List[str] = []
+    for cam in cameras:
+        if cam in subdirs:
+            found[cam] = os.path.join(root, cam)
+            continue
+        key = _normalise(cam)
+        cands = [d for d in subdirs if _normalise(d) == key]
+        if len(cands) > 1:
+            raise ValueError(f'camera {cam!r} matches several folders in {root}: '
+                             f'{", ".join(cands)}; rename them or pass --cameras')
+        if cands:
+            found[cam] = os.path.join(root, cands[0])
+        else:
+            missing.append(f'camera {cam!r}: no folder in {root} (have: '
+                           f'{", ".join(subdirs) or "none"})')
+    users: Dict[str, List[str]] = {}
+    for cam, folder in found.items():
+        users.setdefault(folder, []).append(cam)
+    clash = {f: c for f, c in users.items() if len(c) > 1}
+    if clash:
+        raise ValueError('one folder matches several cameras: ' + '; '.join(
+            f'{os.path.basename(f)} <- {", ".join(c)}' for f, c in clash.items()))
+    return found, missing

@@ -1,0 +1,230 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Tracks as JSON Lines: one JSON object per line and per processed frame.
+
+Schema (units are always metres on write)::
+
+    {"frame": 12, "layout": "coco17", "units": "m", "stamp": 0.2,
+     "tracks": [{"id": 3, "state": "confirmed",
+                 "joints": [[x, y, z] or null, ...],      # J entries, world frame, z up
+                 "confidence": [c, ...],                  # J entries in [0, 1]
+                 "joint_state": [1, ...],                 # 0 missing, 1 triangulated, 2 predicted
+                 "num_views": [3, ...], "position": [x, y, z] or null,
+                 "velocity": [vx, vy, vz] or null, "score": 0.9}]}
+
+``state`` is one of ``tentative``, ``confirmed``, ``coasting``, ``deleted`` (a deleted track
+appears once, as a tombstone). Only ``frame``, ``tracks`` and per track ``id``, ``state``,
+``joints`` are required on read; readers ignore unknown keys. Coordinates are rounded to
+micrometres, confidences to 1e-4.
+"""
+
+from dataclasses import dataclass, field
+import json
+import logging
+import math
+from typing import IO, Iterable, Iterator, List, Optional, Sequence, Union
+
+from mv3dpose_ros.core.types import Track, TrackState
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+_UNITS = {'m': 1.0, 'cm': 0.01, 'mm': 0.001}
+_STATES = {s.name.lower(): s for s in TrackState}
+
+
+def _xyz(v: np.ndarray) -> Optional[List[float]]:
+    v = np.asarray(v, dtype=float)
+    return [round(float(c), 6) for c in v] if np.isfinite(v).all() else None
+
+
+def track_to_dict(track: Track) -> dict:
+    """Convert a core :class:`Track` to its JSON object (missing joints become null)."""
+    valid = np.asarray(track.valid) & np.isfinite(track.joints).all(-1)
+    return {
+        'id': int(track.track_id),
+        'state': TrackState(track.state).name.lower(),
+        'joints': [_xyz(p) if ok else None for p, ok in zip(track.joints, valid)],
+        'confidence': [round(float(c), 4) if math.isfinite(c) else 0.0
+                       for c in np.asarray(track.confidence, dtype=float)],
+        'joint_state': [int(s) for s in track.joint_state],
+        'num_views': [int(n) for n in track.num_views],
+        'position': _xyz(track.position),
+        'velocity': _xyz(track.velocity),
+        'score': round(float(track.score), 4),
+    }
+
+
+def frame_to_line(frame: int, tracks: Sequence[Track], layout: str,
+                  stamp: Optional[float] = None) -> str:
+    """Serialise one frame to a JSON line (without the newline)."""
+    obj = {'frame': int(frame), 'layout': layout, 'units': 'm',
+           'stamp': None if stamp is None else round(float(stamp), 6),
+           'tracks': [track_to_dict(t) for t in tracks]}
+    return json.dumps(obj, separators=(',', ':'), allow_nan=False)
+
+
+class TracksWriter:
+    """Write frames of tracks to a JSON Lines file (a path or an open text stream)."""
+
+    def __init__(self, target: Union[str, IO[str]], layout: str):
+        """Open ``target`` for writing; ``layout`` is recorded on every line."""
+        self.layout = layout
+        self._own = isinstance(target, str)
+        self._f = open(target, 'w', encoding='utf-8') if self._own else target
+        self.frames = 0
+
+    def write(self, frame: int, tracks: Sequence[Track], stamp: Optional[float] = None) -> None:
+        """Append one frame."""
+        self._f.write(frame_to_line(frame, tracks, self.layout, stamp) + '\n')
+        self.frames += 1
+
+    def close(self) -> None:
+        """Flush, and close the file if this writer opened it."""
+        self._f.flush()
+        if self._own:
+            self._f.close()
+
+    def __enter__(self) -> 'TracksWriter':
+        """Return self."""
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Close."""
+        self.close()
+
+
+@dataclass
+class TrackRecord:
+    """One track of one frame as read back: joints ``[J, 3]`` metres, NaN where null."""
+
+    id: int
+    state: TrackState
+    joints: np.ndarray
+    confidence: np.ndarray
+    joint_state: Optional[np.ndarray] = None
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class TracksFrame:
+    """One line of a tracks file."""
+
+    frame: int
+    stamp: Optional[float]
+    layout: Optional[str]
+    tracks: List[TrackRecord]
+
+    def select(self, states: Iterable[TrackState]) -> List[TrackRecord]:
+        """Return the tracks whose state is in ``states``."""
+        states = set(states)
+        return [t for t in self.tracks if t.state in states]
+
+
+class TracksFormatError(ValueError):
+    """A line of a tracks file that does not follow the schema."""
+
+
+def _parse_track(obj: object, scale: float) -> TrackRecord:
+    if not isinstance(obj, dict):
+        raise TracksFormatError(f'track is {type(obj).__name__}, expected an object')
+    for key in ('id', 'state', 'joints'):
+        if key not in obj:
+            raise TracksFormatError(f'track without "{key}"')
+    state = _STATES.get(str(obj['state']).lower())
+    if state is None:
+        raise TracksFormatError(f'track {obj["id"]}: unknown state {obj["state"]!r} '
+                                f'(known: {", ".join(_STATES)})')
+    joints_in = obj['joints']
+    if not isinstance(joints_in, list):
+        raise TracksFormatError(f'track {obj["id"]}: "joints" is not a list')
+    joints = np.full((len(joints_in), 3), np.nan)
+    for j, p in enumerate(joints_in):
+        if p is None:
+            continue
+        if not (isinstance(p, list) and len(p) == 3):
+            raise TracksFormatError(f'track {obj["id"]}: joint {j} is not [x, y, z] or null')
+        try:
+            joints[j] = np.asarray(p, dtype=float) * scale
+        except (TypeError, ValueError):
+            raise TracksFormatError(f'track {obj["id"]}: joint {j} is not numeric') from None
+    conf = obj.get('confidence')
+    if conf is None:
+        conf = np.where(np.isfinite(joints).all(-1), 1.0, 0.0)
+    else:
+        try:
+            conf = np.asarray(conf, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise TracksFormatError(f'track {obj["id"]}: confidence is not numeric') from None
+        if conf.shape[0] != len(joints):
+            raise TracksFormatError(f'track {obj["id"]}: {conf.shape[0]} confidences for '
+                                    f'{len(joints)} joints')
+    js = obj.get('joint_state')
+    rest = {k: v for k, v in obj.items()
+            if k not in ('id', 'state', 'joints', 'confidence', 'joint_state')}
+    try:
+        tid = int(obj['id'])
+    except (TypeError, ValueError):
+        raise TracksFormatError(f'track id {obj["id"]!r} is not an integer') from None
+    return TrackRecord(id=tid, state=state, joints=joints, confidence=conf,
+                       joint_state=None if js is None else np.asarray(js, dtype=np.uint8),
+                       extra=rest)
+
+
+def parse_line(line: str) -> TracksFrame:
+    """Parse one JSON line; raises :class:`TracksFormatError` naming the problem."""
+    try:
+        obj = json.loads(line)
+    except json.JSONDecodeError as e:
+        raise TracksFormatError(f'invalid JSON ({e.msg} at column {e.colno})') from None
+    if not isinstance(obj, dict):
+        raise TracksFormatError(f'line is {type(obj).__name__}, expected an object')
+    if 'frame' not in obj or 'tracks' not in obj:
+        raise TracksFormatError('object without "frame" or "tracks"')
+    units = obj.get('units', 'm')
+    if units not in _UNITS:
+        raise TracksFormatError(f'unknown units {units!r} (known: {", ".join(_UNITS)})')
+    if not isinstance(obj['tracks'], list):
+        raise TracksFormatError('"tracks" is not a list')
+    try:
+        frame = int(obj['frame'])
+    except (TypeError, ValueError):
+        raise TracksFormatError(f'frame {obj["frame"]!r} is not an integer') from None
+    stamp = obj.get('stamp')
+    return TracksFrame(frame=frame, stamp=None if stamp is None else float(stamp),
+                       layout=obj.get('layout'),
+                       tracks=[_parse_track(t, _UNITS[units]) for t in obj['tracks']])
+
+
+def read_tracks(path: str, issues: Optional[List[str]] = None) -> Iterator[TracksFrame]:
+    """
+    Yield the frames of a tracks file in file order.
+
+    Bad lines are reported (``path:line: reason``) in ``issues`` and the log, and skipped;
+    blank lines are ignored.
+    """
+    with open(path, encoding='utf-8') as f:
+        for n, line in enumerate(f, start=1):
+            if not line.strip():
+                continue
+            try:
+                yield parse_line(line)
+            except TracksFormatError as e:
+                msg = f'{path}:{n}: {e}'
+                logger.warning('skipped %s', msg)
+                if issues is not None:
+                    issues.append(msg)
