@@ -1,0 +1,465 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``mv3dpose bag record | play | info``: rosbag2 tools for machines without ``ros2 bag``.
+
+record  subscribes with ``raw=True`` (no decoding cost) and writes the CDR bytes as they arrive,
+        MCAP by default; the publishers' QoS is stored as ``offered_qos_profiles`` so that a
+        replay offers the same QoS. Stops on ``--duration``, ``--count``, ``--idle-timeout``,
+        Ctrl-C or SIGTERM and always finishes a valid bag.
+play    publishes the raw bytes at the recorded pace (``--rate``), each preceded by a
+        ``rosgraph_msgs/Clock`` carrying the message's bag time, so nodes with ``use_sim_time``
+        follow the bag; ``--loop`` makes the clock jump back, which the fusion node treats as
+        a reset.
+info    prints topics, types, counts, QoS, duration and storage.
+"""
+
+import argparse
+import importlib
+import json
+import signal
+import sys
+import time
+from typing import Dict, Iterable, List, Optional, Sequence
+
+from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, STORAGES
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.interfaces import QosTime
+
+# Topics that ``record`` without topic names leaves out (ros2 bag record -a does the same for
+# the hidden ones; /clock would feed a replayed clock back into itself).
+EXCLUDED_BY_DEFAULT = ('/rosout', '/parameter_events', '/clock')
+
+
+# ------------------------------------------------------------------------------------ helpers
+
+def import_msg_class(msgtype: str):
+    """Return the rclpy message class of ``pkg/msg/Type`` (or ``pkg/Type``)."""
+    parts = msgtype.split('/')
+    if len(parts) not in (2, 3):
+        raise ValueError(f'message type {msgtype!r} is not of the form pkg/msg/Type')
+    pkg, name = parts[0], parts[-1]
+    try:
+        return getattr(importlib.import_module(f'{pkg}.msg'), name)
+    except (ImportError, AttributeError) as exc:
+        raise BagError(f'message type {msgtype} is not available in this ROS environment '
+                       f'(is {pkg} installed and sourced?): {exc}') from exc
+
+
+def qos_to_rclpy(profiles: Sequence[Qos]):
+    """
+    Turn recorded offered QoS profiles into the rclpy profile a player offers.
+
+    No recorded profile gives rosbag2's default (RELIABLE, VOLATILE, KEEP_LAST 10). With several
+    publishers recorded, the weakest reliability and durability are offered so that every
+    original subscriber still matches.
+    """
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    if not profiles:
+        return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+    best_effort = any(p.reliability == QosReliability.BEST_EFFORT for p in profiles)
+    transient = all(p.durability == QosDurability.TRANSIENT_LOCAL for p in profiles)
+    depth = max(int(p.depth) for p in profiles) or 10
+    keep_all = any(p.history == QosHistory.KEEP_ALL for p in profiles)
+    return QoSProfile(
+        depth=depth,
+        history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
+
+
+def qos_from_rclpy(profile) -> Qos:
+    """Convert an rclpy ``QoSProfile`` (as discovered on a publisher) to a rosbags ``Qos``."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
+
+    def duration(d) -> QosTime:
+        ns = int(getattr(d, 'nanoseconds', 0) or 0)
+        if ns <= 0 or ns >= 2 ** 63 - 1:
+            return QosTime(0, 0)
+        return QosTime(ns // 10 ** 9, ns % 10 ** 9)
+
+    reliability = {ReliabilityPolicy.RELIABLE: QosReliability.RELIABLE,
+                   ReliabilityPolicy.BEST_EFFORT: QosReliability.BEST_EFFORT}
+    durability = {DurabilityPolicy.TRANSIENT_LOCAL: QosDurability.TRANSIENT_LOCAL,
+                  DurabilityPolicy.VOLATILE: QosDurability.VOLATILE}
+    history = {HistoryPolicy.KEEP_LAST: QosHistory.KEEP_LAST,
+               HistoryPolicy.KEEP_ALL: QosHistory.KEEP_ALL}
+    return Qos(
+        history=history.get(profile.history, QosHistory.KEEP_LAST),
+        depth=int(profile.depth),
+        reliability=reliability.get(profile.reliability, QosReliability.RELIABLE),
+        durability=durability.get(profile.durability, QosDurability.VOLATILE),
+        deadline=duration(profile.deadline), lifespan=duration(profile.lifespan),
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=duration(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=False)
+
+
+def _subscription_qos(offered: List[Qos]):
+    """Subscribe so that every discovered publisher matches (best effort if any offers it)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    best_effort = any(q.reliability == QosReliability.BEST_EFFORT for q in offered)
+    transient = bool(offered) and all(
+        q.durability == QosDurability.TRANSIENT_LOCAL for q in offered)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=100,
+        reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE)
+
+
+class _StopFlag:
+    """SIGINT / SIGTERM set a flag instead of killing the process, so bags close cleanly."""
+
+    def __init__(self):
+        self.stop = False
+        self._old = {}
+
+    def __enter__(self) -> '_StopFlag':
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[sig] = signal.signal(sig, self._handle)
+            except ValueError:  # not the main thread: rely on the caller's own stop logic
+                pass
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.stop = True
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def _progress(total: Optional[int], desc: str, unit: str = 'msg', disable: Optional[bool] = None):
+    from tqdm import tqdm
+    # disable=None: tqdm shows the bar only on a terminal, so logs and tests stay clean
+    return tqdm(total=total, desc=desc, unit=unit, disable=disable, leave=False,
+                file=sys.stderr, dynamic_ncols=True)
+
+
+def _init_rclpy(args_ros: Optional[List[str]] = None):
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    context = rclpy.Context()
+    rclpy.init(args=args_ros, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    return context
+
+
+# ------------------------------------------------------------------------------------ record
+
+def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = DEFAULT_STORAGE,
+           duration: Optional[float] = None, count: Optional[int] = None,
+           idle_timeout: Optional[float] = None, discovery_interval: float = 0.5,
+           overwrite: bool = False, use_sim_time: bool = False, quiet: bool = False,
+           context=None) -> Dict[str, int]:
+    """
+    Record ``topics`` (all discovered ones when empty) into a bag at ``output``.
+
+    Stops after ``duration`` seconds, ``count`` messages, ``idle_timeout`` seconds without a
+    message (once one arrived), or on SIGINT / SIGTERM. Returns messages per topic.
+    """
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    wanted = list(topics or [])
+    own_context = context is None
+    if own_context:
+        context = _init_rclpy()
+    node = Node('mv3dpose_bag_recorder', context=context,
+                parameter_overrides=[Parameter('use_sim_time', value=use_sim_time)])
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    subs = {}
+    state = {'total': 0, 'last': None}
+    writer = BagWriter(output, storage=storage, overwrite=overwrite)
+    bar = _progress(None, f'recording {output}', disable=True if quiet else None)
+    log = node.get_logger()
+
+    def make_callback(topic: str):
+        def callback(data: bytes) -> None:
+            stamp = node.get_clock().now().nanoseconds if use_sim_time else time.time_ns()
+            writer.write(topic, stamp, data)
+            state['total'] += 1
+            state['last'] = time.monotonic()
+            bar.update(1)
+        return callback
+
+    def discover() -> None:
+        for topic, types in node.get_topic_names_and_types():
+            if topic in subs or not types:
+                continue
+            if wanted and topic not in wanted:
+                continue
+            if not wanted and topic in EXCLUDED_BY_DEFAULT:
+                continue
+            msgtype = types[0]
+            try:
+                msg_class = import_msg_class(msgtype)
+            except BagError as exc:
+                log.warning(f'not recording {topic}: {exc}')
+                subs[topic] = None
+                continue
+            infos = node.get_publishers_info_by_topic(topic)
+            offered = [qos_from_rclpy(i.qos_profile) for i in infos]
+            if not offered:
+                continue  # only subscribers so far: wait for a publisher to learn its QoS
+            writer.add_topic(topic, msgtype, offered)
+            subs[topic] = node.create_subscription(
+                msg_class, topic, make_callback(topic), _subscription_qos(offered), raw=True)
+            log.info(f'recording {topic} [{msgtype}]')
+
+    start = time.monotonic()
+    next_discovery = start
+    try:
+        with _StopFlag() as flag:
+            while not flag.stop and context.ok():
+                now = time.monotonic()
+                if duration is not None and now - start >= duration:
+                    break
+                if count is not None and state['total'] >= count:
+                    break
+                if (idle_timeout is not None and state['last'] is not None
+                        and now - state['last'] >= idle_timeout):
+                    break
+                if now >= next_discovery:
+                    discover()
+                    next_discovery = now + discovery_interval
+                executor.spin_once(timeout_sec=0.05)
+    except BaseException:
+        bar.close()
+        writer.abort()
+        raise
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        if own_context:
+            context.try_shutdown()
+    bar.close()
+    missing = [t for t in wanted if subs.get(t) is None]
+    if missing and not quiet:
+        print(f'warning: never saw a publisher on {", ".join(missing)}', file=sys.stderr)
+    writer.close()
+    return dict(writer.counts)
+
+
+# ------------------------------------------------------------------------------------ play
+
+def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iterable[str]] = None,
+         start_offset: float = 0.0, clock: bool = True, wait_for_subscribers: float = 0.0,
+         delay: float = 0.0, quiet: bool = False, context=None, stop=None) -> int:
+    """
+    Publish the messages of the bag at ``path``; return how many were published.
+
+    ``rate`` scales the pace (2 = twice as fast, 0 = as fast as possible); ``start_offset``
+    skips the first seconds; ``wait_for_subscribers`` waits up to that many seconds until every
+    played topic has a subscriber (nothing is lost to discovery); ``stop`` is an optional
+    callable polled between messages.
+    """
+    from rclpy.duration import Duration
+    from rclpy.node import Node
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    if rate < 0:
+        raise ValueError(f'--rate must be >= 0, got {rate}')
+    reader = BagReader(path)
+    summary = reader.topics()
+    chosen = list(summary) if not topics else list(topics)
+    unknown = [t for t in chosen if t not in summary]
+    if unknown:
+        reader.close()
+        raise BagError(f'{path}: no topic {", ".join(unknown)} in the bag '
+                       f'(it has {", ".join(summary) or "none"})')
+    own_context = context is None
+    if own_context:
+        context = _init_rclpy()
+    node = Node('mv3dpose_bag_player', context=context)
+    published = 0
+    try:
+        pubs = {}
+        for topic in chosen:
+            info = summary[topic]
+            pubs[topic] = node.create_publisher(import_msg_class(info.msgtype), topic,
+                                                qos_to_rclpy(info.qos))
+        clock_pub = None
+        if clock:
+            clock_pub = node.create_publisher(
+                Clock, '/clock', QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
+                                            reliability=ReliabilityPolicy.RELIABLE))
+        with _StopFlag() as flag:
+            def stopped() -> bool:
+                return flag.stop or not context.ok() or bool(stop and stop())
+
+            if wait_for_subscribers > 0:
+                deadline = time.monotonic() + wait_for_subscribers
+                while (time.monotonic() < deadline and not stopped()
+                       and any(p.get_subscription_count() == 0 for p in pubs.values())):
+                    time.sleep(0.05)
+            if delay > 0:
+                time.sleep(delay)
+            start_ns = reader.start_ns + int(round(start_offset * 1e9))
+            total = sum(summary[t].count for t in chosen)
+            bar = _progress(total if not loop else None, f'playing {path}',
+                            disable=True if quiet else None)
+            try:
+                while not stopped():
+                    wall0 = time.monotonic()
+                    for m in reader.messages(chosen, start_ns=start_ns if start_offset else None):
+                        if stopped():
+                            break
+                        if rate > 0:
+                            due = wall0 + (m.timestamp - start_ns) * 1e-9 / rate
+                            while not stopped():
+                                wait = due - time.monotonic()
+                                if wait <= 0:
+                                    break
+                                time.sleep(min(wait, 0.1))
+                        if clock_pub is not None:
+                            msg = Clock()
+                            msg.clock.sec, msg.clock.nanosec = divmod(m.timestamp, 10 ** 9)
+                            clock_pub.publish(msg)
+                        pubs[m.topic].publish(m.data)
+                        published += 1
+                        bar.update(1)
+                    if not loop:
+                        break
+            finally:
+                bar.close()
+            # give reliable readers the chance to fetch the tail before the process exits
+            for pub in list(pubs.values()) + ([clock_pub] if clock_pub else []):
+                pub.wait_for_all_acked(Duration(seconds=2.0))
+    finally:
+        reader.close()
+        node.destroy_node()
+        if own_context:
+            context.try_shutdown()
+    return published
+
+
+# ------------------------------------------------------------------------------------ info
+
+def _qos_text(profiles: Sequence[Qos]) -> str:
+    if not profiles:
+        return 'default'
+    return ', '.join(sorted({f'{p.reliability.name.lower()}/{p.durability.name.lower()}'
+                             f'/{p.history.name.lower()}({p.depth})' for p in profiles}))
+
+
+def info(path: str) -> dict:
+    """Return a summary of the bag at ``path`` (what ``mv3dpose bag info`` prints)."""
+    with BagReader(path) as reader:
+        return {
+            'path': str(path),
+            'storage': reader.storage,
+            'messages': reader.message_count,
+            'duration_s': reader.duration_s,
+            'start_ns': reader.start_ns,
+            'end_ns': reader.end_ns,
+            'topics': {t: {'type': s.msgtype, 'count': s.count, 'qos': _qos_text(s.qos)}
+                       for t, s in reader.topics().items()},
+        }
+
+
+def format_info(summary: dict) -> str:
+    """Render an ``info`` summary as text."""
+    lines = [f'bag:       {summary["path"]}',
+             f'storage:   {summary["storage"]}',
+             f'duration:  {summary["duration_s"]:.3f} s',
+             f'start:     {summary["start_ns"] * 1e-9:.9f} s',
+             f'end:       {summary["end_ns"] * 1e-9:.9f} s',
+             f'messages:  {summary["messages"]}',
+             f'topics:    {len(summary["topics"])}']
+    width = max([len(t) for t in summary['topics']] + [5])
+    tw = max([len(v['type']) for v in summary['topics'].values()] + [4])
+    for topic, v in summary['topics'].items():
+        lines.append(f'  {topic:<{width}}  {v["type"]:<{tw}}  {v["count"]:>7}  qos {v["qos"]}')
+    return '\n'.join(lines)
+
+
+# ------------------------------------------------------------------------------------ CLI
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``record``, ``play`` and ``info`` subcommands."""
+    sub = parser.add_subparsers(dest='bag_command', metavar='{record,play,info}')
+    sub.required = True
+    rec = sub.add_parser('record', help='record topics into a rosbag2 bag (MCAP by default)')
+    rec.add_argument('topics', nargs='*',
+                     help='topics to record (default: every discovered topic except '
+                          f'{", ".join(EXCLUDED_BY_DEFAULT)})')
+    rec.add_argument('-o', '--output', required=True, help='output bag directory (must not exist)')
+    rec.add_argument('--storage', choices=STORAGES, default=DEFAULT_STORAGE)
+    rec.add_argument('--duration', type=float, help='stop after this many seconds')
+    rec.add_argument('--count', type=int, help='stop after this many messages in total')
+    rec.add_argument('--idle-timeout', type=float,
+                     help='stop when no message arrived for this many seconds (after the first)')
+    rec.add_argument('--use-sim-time', action='store_true',
+                     help='stamp messages with /clock time instead of the system time')
+    rec.add_argument('--overwrite', action='store_true', help='replace an existing output')
+    rec.add_argument('-q', '--quiet', action='store_true')
+
+    ply = sub.add_parser('play', help='publish the messages of a bag with /clock')
+    ply.add_argument('bag', help='bag directory or .mcap / .db3 file')
+    ply.add_argument('--rate', type=float, default=1.0,
+                     help='playback speed factor (0 = as fast as possible)')
+    ply.add_argument('--loop', action='store_true', help='start again at the end')
+    ply.add_argument('--topics', nargs='+', help='play only these topics')
+    ply.add_argument('--start-offset', type=float, default=0.0,
+                     help='skip the first seconds of the bag')
+    ply.add_argument('--no-clock', dest='clock', action='store_false',
+                     help='do not publish /clock')
+    ply.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
+                     help='wait up to this long until every topic has a subscriber')
+    ply.add_argument('--delay', type=float, default=0.0, help='sleep before playing [s]')
+    ply.add_argument('-q', '--quiet', action='store_true')
+
+    inf = sub.add_parser('info', help='print topics, types, counts, duration and storage')
+    inf.add_argument('bag', help='bag directory or .mcap / .db3 file')
+    inf.add_argument('--json', action='store_true', help='print JSON instead of text')
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``mv3dpose bag <record|play|info>``."""
+    try:
+        if args.bag_command == 'info':
+            summary = info(args.bag)
+            print(json.dumps(summary, indent=2) if args.json else format_info(summary))
+            return 0
+        if args.bag_command == 'record':
+            counts = record(args.output, args.topics, storage=args.storage,
+                            duration=args.duration, count=args.count,
+                            idle_timeout=args.idle_timeout, overwrite=args.overwrite,
+                            use_sim_time=args.use_sim_time, quiet=args.quiet)
+            total = sum(counts.values())
+            print(f'wrote {args.output}: {total} messages on {len(counts)} topics'
+                  + ''.join(f'\n  {t}: {n}' for t, n in sorted(counts.items())))
+            return 0
+        if args.bag_command == 'play':
+            n = play(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
+                     start_offset=args.start_offset, clock=args.clock,
+                     wait_for_subscribers=args.wait_for_subscribers, delay=args.delay,
+                     quiet=args.quiet)
+            if not args.quiet:
+                print(f'played {n} messages from {args.bag}')
+            return 0
+    except (BagError, ValueError) as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    return 2
+
+
+__all__ = ['add_arguments', 'run', 'record', 'play', 'info', 'format_info', 'import_msg_class',
+           'qos_to_rclpy', 'qos_from_rclpy']
