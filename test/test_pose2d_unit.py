@@ -1,0 +1,280 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Pre/post-processing of the pose adapters on tiny ONNX models with crafted outputs.
+
+The models are written by ``onnx_min`` (protobuf by hand; the ``onnx`` package is not in the
+venv) and return fixed tensors, so every expected number below follows from the letterbox
+geometry alone: no real network is needed.
+"""
+
+import hashlib
+import json
+import os
+
+from mv3dpose_ros.cli import main as cli_main
+from mv3dpose_ros.pose2d import fetch as fetch_mod
+from mv3dpose_ros.pose2d import models
+from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
+from mv3dpose_ros.pose2d.ops import Letterbox, nms
+import numpy as np
+from onnx_min import make_constant_model
+import pytest
+
+H, W = 1080, 1920          # original image (Panoptic HD size)
+IN = (640, 640)
+
+
+def _write(tmp_path, name, data):
+    path = tmp_path / name
+    path.write_bytes(data)
+    return str(path)
+
+
+def _person(rng, center, spread=120.0):
+    """Return 17 original-pixel keypoints around ``center`` and their box."""
+    kpts = np.asarray(center) + rng.uniform(-spread, spread, size=(17, 2))
+    return kpts, np.concatenate([kpts.min(0) - 10, kpts.max(0) + 10])
+
+
+def _yolo_column(box_lb, kpts_in, score, conf):
+    """Build one [56] YOLO output column in network-input pixels."""
+    x0, y0, x1, y1 = box_lb
+    col = np.zeros(56, np.float32)
+    col[:5] = [(x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0, score]
+    col[5:] = np.concatenate([kpts_in, conf[:, None]], axis=1).reshape(-1)
+    return col
+
+
+@pytest.fixture
+def yolo_case(tmp_path):
+    """Write a YOLO-pose ONNX whose output holds two people, a duplicate and a low-score box."""
+    rng = np.random.default_rng(0)
+    lb = Letterbox.fit((H, W), IN)
+    out = np.zeros((1, 56, 8400), np.float32)
+    people = []
+    for col, (center, score) in zip((100, 5000), (((600, 500), 0.9), ((1400, 600), 0.5))):
+        kpts, box = _person(rng, center)
+        conf = rng.uniform(0.3, 1.0, 17).astype(np.float32)
+        conf[3] = 0.1                                     # below the keypoint threshold
+        box_in = lb.to_input(box.reshape(2, 2)).reshape(4)
+        out[0, :, col] = _yolo_column(box_in, lb.to_input(kpts), score, conf)
+        people.append((kpts, box, score, conf))
+    dup = out[0, :, 100].copy()                           # same person, shifted 2 px
+    dup[0] += 2.0
+    dup[4] = 0.8
+    out[0, :, 200] = dup
+    low = out[0, :, 5000].copy()
+    low[4] = 0.2                                          # under the 0.25 score threshold
+    low[0] += 300
+    out[0, :, 7000] = low
+    data = make_constant_model([('images', np.float32, [1, 3, 640, 640])], {'output0': out},
+                               {'task': 'pose', 'kpt_shape': '[17, 3]',
+                                'author': 'Ultralytics', 'license': 'AGPL-3.0 License'})
+    return _write(tmp_path, 'yolo.onnx', data), people
+
+
+def test_letterbox_roundtrip_and_geometry():
+    lb = Letterbox.fit((H, W), IN)
+    assert (lb.content_w, lb.content_h, lb.left, lb.top) == (640, 360, 0, 140)
+    lb2 = Letterbox.fit((480, 360), (384, 640))          # portrait into landscape
+    assert lb2.content_h == 384 and lb2.top == 0 and lb2.left == (640 - lb2.content_w) // 2
+    pts = np.random.default_rng(1).uniform(0, 1000, size=(5, 17, 2))
+    for box in (lb, lb2):
+        np.testing.assert_allclose(box.to_original(box.to_input(pts)), pts, atol=1e-9)
+
+
+def test_letterbox_moves_image_content_where_to_input_says():
+    img = np.zeros((H, W, 3), np.uint8)
+    cx, cy = 1000, 300
+    img[cy - 6:cy + 7, cx - 6:cx + 7] = 255
+    lb = Letterbox.fit((H, W), IN)
+    padded = lb.apply(img, 114)
+    assert padded.shape == (640, 640, 3)
+    assert np.all(padded[:lb.top] == 114) and np.all(padded[lb.top + lb.content_h:] == 114)
+    mass = padded[lb.top:lb.top + lb.content_h].astype(np.float64).sum(axis=2)
+    ys, xs = np.nonzero(mass)
+    centroid = np.array([np.average(xs, weights=mass[ys, xs]),
+                         np.average(ys, weights=mass[ys, xs]) + lb.top])
+    # to_input is the training-time mapping x * s + pad; cv2's pixel-centre resize differs by
+    # 0.5 * (1 - s) = 0.33 input px at s = 1/3.
+    np.testing.assert_allclose(centroid, lb.to_input(np.array([cx, cy])), atol=0.5)
+
+
+def test_nms_keeps_best_of_overlaps():
+    boxes = np.array([[0, 0, 10, 10], [1, 0, 11, 10], [50, 50, 60, 60], [0, 0, 10, 10.5]])
+    scores = np.array([0.6, 0.9, 0.5, 0.3])
+    keep = nms(boxes, scores, 0.7)
+    assert keep.tolist() == [1, 2]                      # 0 and 3 overlap 1 by IoU > 0.7
+    assert nms(boxes, scores, 0.99).tolist() == [1, 0, 2, 3]
+    assert nms(np.zeros((0, 4)), np.zeros(0), 0.5).size == 0
+
+
+def test_yolo_postprocess_recovers_crafted_people(yolo_case):
+    path, people = yolo_case
+    est = open_estimator(path, threads=1, keypoint_threshold=0.2)
+    assert est.family == 'yolo-pose' and est.input_size == IN and 'AGPL' in est.licence
+    img = np.full((H, W, 3), 40, np.uint8)
+    det = est.infer(img)
+    assert len(det) == 2                                 # duplicate suppressed, low score gone
+    assert det.keypoints.shape == (2, 17, 3) and det.keypoints.dtype == np.float32
+    for i, (kpts, box, score, conf) in enumerate(people):
+        np.testing.assert_allclose(det.keypoints[i, :, :2], kpts, atol=0.02)
+        np.testing.assert_allclose(det.boxes[i], box, atol=0.05)
+        assert det.scores[i] == pytest.approx(score)
+        expect = np.where(conf < 0.2, 0.0, conf)
+        np.testing.assert_allclose(det.keypoints[i, :, 2], expect, atol=1e-6)
+    assert est.last_timing.infer_ms >= 0 and est.last_timing.total_ms > 0
+
+
+def test_yolo_threshold_and_channel_orders(yolo_case):
+    path, people = yolo_case
+    est = open_estimator(path, threads=1, score_threshold=0.95)
+    assert len(est.infer(np.zeros((H, W, 3), np.uint8))) == 0
+    empty = est.infer(np.zeros((H, W, 3), np.uint8))
+    assert empty.keypoints.shape == (0, 17, 3) and empty.boxes.shape == (0, 4)
+    est = open_estimator(path, threads=1)
+    grey = est.infer(np.zeros((H, W), np.uint8), order='gray')
+    rgb = est.infer(np.zeros((H, W, 3), np.uint8), order='rgb')
+    np.testing.assert_allclose(grey.keypoints, rgb.keypoints)
+    with pytest.raises(ValueError, match='uint8'):
+        est.infer(np.zeros((H, W, 3), np.float32))
+    with pytest.raises(ValueError, match='shape'):
+        est.infer(np.zeros((H, W, 4), np.uint8))
+
+
+def test_yolo_preprocess_tensor_is_rgb_chw_scaled(yolo_case):
+    path, _ = yolo_case
+    est = open_estimator(path, threads=1)
+    img = np.zeros((H, W, 3), np.uint8)
+    img[..., 2] = 255                                    # pure red in BGR
+    tensor, lb = est.preprocess(img, 'bgr')
+    assert tensor.shape == (1, 3, 640, 640) and tensor.dtype == np.float32
+    mid = lb.top + lb.content_h // 2
+    assert tensor[0, 0, mid, 320] == pytest.approx(1.0)  # R channel first
+    assert tensor[0, 2, mid, 320] == pytest.approx(0.0)
+    assert tensor[0, 1, 5, 320] == pytest.approx(114 / 255)
+
+
+def test_movenet_postprocess_and_preprocess(tmp_path):
+    ih, iw = 256, 256
+    lb = Letterbox.fit((H, W), (ih, iw))
+    rng = np.random.default_rng(2)
+    kpts, _ = _person(rng, (900, 540), 200)
+    k_in = lb.to_input(kpts)
+    out = np.zeros((1, 6, 56), np.float32)
+    conf = rng.uniform(0.2, 0.9, 17)
+    out[0, 0, :51] = np.stack([k_in[:, 1] / ih, k_in[:, 0] / iw, conf], 1).reshape(-1)
+    out[0, 0, 51:55] = [0.4, 0.3, 0.6, 0.7]
+    out[0, 0, 55] = 0.7
+    out[0, 1, 55] = 0.1                                 # below the default 0.2
+    data = make_constant_model([('input', np.uint8, [1, ih, iw, 3])], {'output_0': out})
+    est = open_estimator(_write(tmp_path, 'movenet.onnx', data), threads=1)
+    assert est.family == 'movenet-multipose' and est.input_size == (ih, iw)
+    img = np.zeros((H, W, 3), np.uint8)
+    img[..., 0] = 255                                    # pure blue in BGR
+    tensor, _ = est.preprocess(img, 'bgr')
+    assert tensor.dtype == np.uint8 and tensor.shape == (1, ih, iw, 3)
+    assert tensor[0, ih // 2, iw // 2].tolist() == [0, 0, 255]
+    assert tensor[0, 2, iw // 2].tolist() == [0, 0, 0]   # black padding
+    det = est.infer(img)
+    assert len(det) == 1
+    np.testing.assert_allclose(det.keypoints[0, :, :2], kpts, atol=0.05)
+    np.testing.assert_allclose(det.keypoints[0, :, 2], conf, atol=1e-6)
+    x0, y0 = lb.to_original(np.array([0.3 * iw, 0.4 * ih]))
+    np.testing.assert_allclose(det.boxes[0, :2], [x0, y0], atol=0.05)
+
+
+def test_dynamic_input_uses_requested_size(tmp_path):
+    out = np.zeros((1, 56, 5040), np.float32)
+    data = make_constant_model([('images', np.float32, [1, 3, 'height', 'width'])],
+                               {'output0': out}, {'task': 'pose'},
+                               output_dims={'output0': [1, 56, 'anchors']})
+    path = _write(tmp_path, 'dyn.onnx', data)
+    assert open_estimator(path, input_size=(384, 640)).input_size == (384, 640)
+    assert open_estimator(path).input_size == (640, 640)
+
+
+@pytest.mark.parametrize('inputs,outputs,meta,match', [
+    ([('images', np.float32, [1, 3, 640, 640])], {'output0': np.zeros((1, 84, 8400))},
+     {'task': 'detect'}, "'detect' model, not a pose model"),
+    ([('images', np.float32, [1, 3, 640, 640])], {'output0': np.zeros((1, 300, 57))},
+     {'task': 'pose'}, 'nms=False'),
+    ([('data', np.float32, [1, 3, 224, 224])], {'logits': np.zeros((1, 1000))}, {},
+     'output shape'),
+    ([('images', np.float32, [1, 3, 640, 640])], {'output0': np.zeros((1, 56, 8400))},
+     {'task': 'pose', 'kpt_shape': '[21, 3]'}, 'COCO-17'),
+    ([('x', np.float32, [1, 224, 224, 3])], {'y': np.zeros((1, 6, 56))}, {}, 'no supported'),
+])
+def test_wrong_models_are_refused(tmp_path, inputs, outputs, meta, match):
+    outputs = {k: v.astype(np.float32) for k, v in outputs.items()}
+    path = _write(tmp_path, 'bad.onnx', make_constant_model(inputs, outputs, meta))
+    with pytest.raises(ModelError, match='not a supported 2D pose model') as info:
+        open_estimator(path)
+    assert match in str(info.value)
+
+
+def test_refusals_name_the_problem(tmp_path, yolo_case):
+    path, _ = yolo_case
+    with pytest.raises(ModelError, match='movenet-multipose.*requested'):
+        open_estimator(path, family='movenet-multipose')
+    with pytest.raises(ModelError, match='static input of 640x640'):
+        open_estimator(path, input_size=(384, 640))
+    with pytest.raises(ModelError, match='not found'):
+        open_estimator(str(tmp_path / 'missing.onnx'))
+    with pytest.raises(ModelError, match='cannot load'):
+        open_estimator(_write(tmp_path, 'junk.onnx', b'not a model at all'))
+
+
+def test_sizes_and_missing_model_message(tmp_path):
+    spec = models.get_spec('yolo11n-pose')
+    assert models.parse_size('640', spec) == (640, 640)
+    assert models.parse_size('384x640', spec) == (384, 640)
+    with pytest.raises(ValueError, match='multiples of 32'):
+        models.parse_size('400x640', spec)
+    with pytest.raises(ValueError, match='unknown model'):
+        models.get_spec('yolov99')
+    with pytest.raises(models.ModelNotFound, match='mv3dpose model fetch --model yolo11n-pose'):
+        models.resolve_model_path('yolo11n-pose', '384x640', str(tmp_path))
+
+
+def test_fetch_is_idempotent_when_checksum_matches(tmp_path, yolo_case, capsys):
+    """A present file whose sha256 matches its sidecar is kept; no build step runs."""
+    src, _ = yolo_case
+    cache = tmp_path / 'cache'
+    cache.mkdir()
+    dest = models.model_file('yolo11n-pose', (640, 640), str(cache))
+    data = open(src, 'rb').read()
+    open(dest, 'wb').write(data)
+    meta = {'name': 'yolo11n-pose', 'family': 'yolo-pose', 'input_size': [640, 640],
+            'onnx_sha256': hashlib.sha256(data).hexdigest()}
+    open(models.sidecar_file(dest), 'w').write(json.dumps(meta))
+    assert fetch_mod.is_current(dest)
+    assert fetch_mod.fetch('yolo11n-pose', [(640, 640)], directory=str(cache)) == [dest]
+    assert 'present and verified' in capsys.readouterr().out
+    assert sorted(os.listdir(cache)) == sorted(['.fetch.lock', os.path.basename(dest),
+                                                os.path.basename(models.sidecar_file(dest))])
+    open(dest, 'ab').write(b'x')                         # corrupted: no longer current
+    assert not fetch_mod.is_current(dest)
+    # The CLI finds it, lists it and reports its family.
+    assert cli_main(['model', 'path', '--cache-dir', str(cache)]) == 0
+    assert capsys.readouterr().out.strip() == dest
+    assert cli_main(['model', 'list', '--json', '--cache-dir', str(cache)]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    assert listed['models'][0]['fetched'] == ['640x640']
+    assert cli_main(['model', 'info', src]) == 0
+    assert json.loads(capsys.readouterr().out)['family'] == 'yolo-pose'
+    assert cli_main(['model', 'path', '--size', '384x640', '--cache-dir', str(cache)]) == 1
+    assert 'mv3dpose model fetch' in capsys.readouterr().err
