@@ -374,13 +374,17 @@ def info(path: str) -> dict:
         }
 
 
+def _ns_text(ns: int) -> str:
+    return f'{ns // 10 ** 9}.{ns % 10 ** 9:09d}'
+
+
 def format_info(summary: dict) -> str:
     """Render an ``info`` summary as text."""
     lines = [f'bag:       {summary["path"]}',
              f'storage:   {summary["storage"]}',
              f'duration:  {summary["duration_s"]:.3f} s',
-             f'start:     {summary["start_ns"] * 1e-9:.9f} s',
-             f'end:       {summary["end_ns"] * 1e-9:.9f} s',
+             f'start:     {_ns_text(summary["start_ns"])} s',
+             f'end:       {_ns_text(summary["end_ns"])} s',
              f'messages:  {summary["messages"]}',
              f'topics:    {len(summary["topics"])}']
     width = max([len(t) for t in summary['topics']] + [5])
