@@ -118,6 +118,8 @@ class Camera:
         self.width = _image_size(self.width, 'width', name)
         self.height = _image_size(self.height, 'height', name)
         K = _array(self.K, (3, 3), 'K', name)
+        if not K.any():
+            raise CalibrationError('all zeros (uncalibrated camera?)', camera=name, field='K')
         if not np.allclose(K[2], [0, 0, 1], atol=1e-9) or abs(K[1, 0]) > 1e-9:
             raise CalibrationError(f'not an upper-triangular intrinsics matrix with last row '
                                    f'[0, 0, 1]: {K.tolist()}', camera=name, field='K')
