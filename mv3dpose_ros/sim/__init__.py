@@ -12,4 +12,21 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""sim package."""
+
+"""
+Synthetic multi-camera scenes with ground truth, for tests, benchmarks and demos.
+
+- :mod:`.rig`: cameras on an ellipse around an area (``RigConfig``, ``make_rig``);
+- :mod:`.people`: walking people with varied bodies (``WalkConfig``, ``BodyConfig``,
+  ``simulate_people``);
+- :mod:`.detector`: realistic 2D detector errors (``DetectorNoise``, ``detect``);
+- :mod:`.scene`: all of it together (``Scene``, ``make_scene``).
+"""
+
+from mv3dpose_ros.sim.detector import detect, DetectorNoise
+from mv3dpose_ros.sim.people import BodyConfig, simulate_people, WalkConfig
+from mv3dpose_ros.sim.rig import make_rig, RigConfig
+from mv3dpose_ros.sim.scene import make_scene, Scene
+
+__all__ = ['BodyConfig', 'DetectorNoise', 'RigConfig', 'Scene', 'WalkConfig', 'detect',
+           'make_rig', 'make_scene', 'simulate_people']
