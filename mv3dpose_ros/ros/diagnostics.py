@@ -118,8 +118,10 @@ class TimestampStats:
 
     def __init__(self, max_past_s: float = 5.0, max_future_s: float = 0.5) -> None:
         self.max_past_s, self.max_future_s = max_past_s, max_future_s
-        self.zero_seen = 0
-        self.out_of_range = 0
+        self.zero_seen = 0               # this cycle
+        self.out_of_range = 0            # this cycle
+        self.zero_total = 0
+        self.out_of_range_total = 0
         self._delays: List[float] = []
         self.last_stamp_ns: Optional[int] = None
 
@@ -127,23 +129,26 @@ class TimestampStats:
         """Record one header stamp received at ``now_ns`` (node clock)."""
         if stamp_ns <= 0:
             self.zero_seen += 1
+            self.zero_total += 1
             return
         delay = (now_ns - stamp_ns) / NS_PER_S
         if delay > self.max_past_s or -delay > self.max_future_s:
             self.out_of_range += 1
+            self.out_of_range_total += 1
         self._delays.append(delay)
         self.last_stamp_ns = stamp_ns
 
     def sample(self) -> Tuple[Any, str, Dict[str, Any]]:
-        """Close one cycle; return (level, message, values)."""
+        """Close one cycle; return (level, message, values) of the stamps seen in it."""
         values = {'Earliest timestamp delay:': min(self._delays, default=math.nan),
                   'Latest timestamp delay:': max(self._delays, default=math.nan),
-                  'Zero timestamps seen': self.zero_seen,
-                  'Timestamps out of range': self.out_of_range}
-        self._delays = []
-        if self.zero_seen:
+                  'Zero timestamps seen (total)': self.zero_total,
+                  'Timestamps out of range (total)': self.out_of_range_total}
+        zero, out = self.zero_seen, self.out_of_range
+        self._delays, self.zero_seen, self.out_of_range = [], 0, 0
+        if zero:
             return ERROR, 'Zero timestamp seen.', values
-        if self.out_of_range:
+        if out:
             return ERROR, 'Timestamps too far in past/future seen.', values
         return OK, 'Timestamps are reasonable.', values
 

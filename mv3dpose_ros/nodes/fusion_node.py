@@ -1,0 +1,637 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+fusion_node: N camera streams of ``Person2DArray`` in, tracked 3D skeletons out.
+
+A thin adapter around the core: per-camera subscriptions feed the N-stream synchroniser
+(``core.sync``, header stamps only), each synchronised set goes through ``Fusion.step``, and
+the tracks are published as ``~/tracks`` (``TrackedSkeletonArray``, stamped with the set's
+capture time, in the world frame), ``~/markers`` (RViz, only when subscribed), a latched
+``~/skeleton_info`` and ``/diagnostics``. Every input is validated first; a bad message is
+dropped with a rate-limited log line naming the camera, topic and reason, and counted in the
+diagnostics, so it can neither stop the node nor reach the tracker.
+"""
+
+from collections import Counter
+import math
+import os
+import sys
+import threading
+import time
+from typing import Any, Dict, List, Optional
+
+from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
+from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.camera import CalibrationError, Camera
+from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+from mv3dpose_ros.core.skeleton import convert_poses, get_layout, LAYOUT_NAMES
+from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig, SyncedSet
+from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_ros.ros import params as P
+from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
+                                          make_status, OK, RateLimitedLog, TimestampStats,
+                                          WARN, WindowStats)
+from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers
+from mv3dpose_ros.ros.messages import (InvalidMessage, ns_to_stamp, person2d_array_to_numpy,
+                                       skeleton_info_msg, stamp_to_ns, tracks_to_msg)
+from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
+                                  sensor_qos, subscription_events)
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo
+from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
+
+NS_PER_S = 1_000_000_000
+SYNC_FIELDS = ('slop_s', 'max_wait_s', 'min_views', 'max_queue', 'backward_jump_s')
+
+
+class ConfigError(ValueError):
+    """A parameter or calibration problem that prevents the node from starting."""
+
+
+class _Camera:
+    """Per-camera input state and counters."""
+
+    def __init__(self, name: str, topic: str) -> None:
+        self.name = name
+        self.topic = topic
+        self.received = 0
+        self.accepted = 0
+        self.rejected: Counter = Counter()     # reason -> count (never reset)
+        self.rejected_reported: Counter = Counter()   # snapshot at the last diagnostics cycle
+        self.freq = FrequencyStats()
+        self.stamps = TimestampStats()
+        self.last_rx_ns: Optional[int] = None
+        self.calibration_problem = ''          # '' when the messages agree with calibration
+        self.camera_info_received = False
+
+
+class FusionNode(Node):
+    """ROS adapter of ``core.fusion.Fusion`` fed by the N-stream synchroniser."""
+
+    def __init__(self, node_name: str = 'fusion_node', **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self._lock = threading.RLock()
+        self._declare_parameters()
+        self._read_parameters()
+        self._rlog = RateLimitedLog(self.get_logger().warning, self.log_throttle_s)
+
+        self.tracks_pub = self._publisher(TrackedSkeletonArray, '~/tracks', reliable_qos(10))
+        self.markers_pub = self._publisher(MarkerArray, '~/markers', reliable_qos(5))
+        self.info_pub = self._publisher(SkeletonInfo, '~/skeleton_info', latched_qos())
+        self.info_pub.publish(skeleton_info_msg(self.layout, Header(frame_id=self.world_frame)))
+
+        self.sync = StreamSynchronizer(self.camera_ids, self.sync_config)
+        self.fusion: Optional[Fusion] = None
+        self.cams: Dict[str, _Camera] = {}
+        self._start_ns = self._now_ns()
+        self._published_ids: set = set()
+        self.latency = WindowStats()
+        self.processing = WindowStats()
+        self.output_rate = FrequencyStats()
+        self.last_tracks: List[Track] = []
+        self.counts = Counter()                 # resets, fusion_errors, sets, ...
+        self._last_set_ns: Optional[int] = None
+        self._last_rx_any_ns: Optional[int] = None
+
+        in_qos = sensor_qos(self.input_reliability, self.input_depth)
+        self._subs = []
+        for cam in self.camera_ids:
+            topic = self.input_topic.format(camera=cam)
+            state = _Camera(cam, self.resolve_topic_name(topic))
+            self.cams[cam] = state
+            self._subs.append(self.create_subscription(
+                Person2DArray, topic, lambda msg, c=cam: self._on_persons(c, msg), in_qos,
+                event_callbacks=subscription_events(self, topic, in_qos)))
+            self.get_logger().info(f'input {cam}: {state.topic} [{describe(in_qos)}]')
+        if self.intrinsics_source == 'camera_info':
+            info_qos = sensor_qos('best_effort', 1)
+            for cam in self.camera_ids:
+                topic = self.camera_info_topic.format(camera=cam)
+                self._subs.append(self.create_subscription(
+                    CameraInfo, topic, lambda msg, c=cam: self._on_camera_info(c, msg),
+                    info_qos, event_callbacks=subscription_events(self, topic, info_qos)))
+                self.get_logger().info(f'intrinsics {cam}: {self.resolve_topic_name(topic)} '
+                                       f'[{describe(info_qos)}] (latched on first message)')
+        else:
+            self._build_fusion()
+
+        self.diagnostics = Diagnostics(self, self.diagnostics_period_s)
+        self.diagnostics.add_task(self._diag_inputs)
+        self.diagnostics.add_task(self._diag_pipeline)
+        self._flush_timer = self.create_timer(0.1, self._idle_flush)
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(seconds=-0.5),
+                          on_clock_change=False),
+            post_callback=self._on_time_jump)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.get_logger().info(
+            f'fusing {len(self.camera_ids)} cameras {list(self.camera_ids)} from '
+            f'{self.rig_path} (layout {self.layout.name}, world frame {self.world_frame!r}, '
+            f'use_sim_time {self.get_parameter("use_sim_time").value}); sync slop '
+            f'{self.sync_config.slop_s * 1e3:.1f} ms, max_wait '
+            f'{self.sync_config.max_wait_s * 1e3:.0f} ms, min_views '
+            f'{self.sync_config.min_views}')
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        d = P.declare
+        d(self, 'rig_config', '', 'Rig calibration file (rig YAML, or any format '
+          'core.calibration reads); relative paths are tried against the working directory, '
+          'then the package source and share directories', read_only=True)
+        d(self, 'camera_ids', [], 'Cameras to fuse (rig camera names); empty = every camera of '
+          'the rig', read_only=True)
+        d(self, 'input_topic', '/{camera}/pose2d_node/persons_2d',
+          'Person2DArray topic per camera; {camera} is replaced by the camera id',
+          read_only=True)
+        d(self, 'input_reliability', 'reliable', 'QoS reliability of the inputs: reliable '
+          '(matches reliable publishers only) or best_effort (matches both)', read_only=True)
+        d(self, 'input_depth', 20, 'QoS history depth of each input subscription',
+          read_only=True)
+        d(self, 'layout', 'coco17', 'Skeleton layout fused and published '
+          f'({", ".join(LAYOUT_NAMES)}); inputs of another known layout are converted',
+          read_only=True)
+        d(self, 'world_frame', 'map', "frame_id of tracks and markers (the rig's world, z up)",
+          read_only=True)
+        d(self, 'intrinsics_source', 'rig', 'rig: intrinsics from rig_config; camera_info: '
+          'from the first CameraInfo of each camera (extrinsics stay from the rig)',
+          read_only=True)
+        d(self, 'camera_info_topic', '/{camera}/camera_info',
+          'CameraInfo topic per camera when intrinsics_source is camera_info', read_only=True)
+        sync_help = {
+            'slop_s': "Max stamp distance [s] of a camera's message from the set pivot "
+                      '(about 0.5 / fps)',
+            'max_wait_s': 'Message time [s] to wait for missing cameras before emitting a '
+                          'partial set',
+            'min_views': 'Partial sets with fewer cameras are dropped',
+            'max_queue': 'Buffered messages per camera (oldest dropped beyond)',
+            'backward_jump_s': "A camera's stamps going back by more than this [s] resets "
+                               'the synchroniser and the tracks (bag loop)'}
+        defaults = SyncConfig()
+        for name in SYNC_FIELDS:
+            d(self, f'sync.{name}', getattr(defaults, name), sync_help[name], read_only=True)
+        d(self, 'sync.idle_flush_s', 0.5, 'Emit pending sets once no input arrived for this '
+          'long [s] of node time (end of a stream); 0 disables', read_only=True)
+        P.declare_dataclass(self, FusionConfig, 'fusion', read_only=True)
+        d(self, 'publish_tentative', False, 'Also publish TENTATIVE (unconfirmed) tracks',
+          dynamic=True)
+        d(self, 'input_max_future_s', 2.0, 'Drop inputs stamped more than this [s] ahead of '
+          'the node clock (skipped while the clock is zero)', read_only=True)
+        d(self, 'log_throttle_s', 5.0, 'Rate limit [s] of repeated warnings per camera and '
+          'reason', read_only=True)
+        d(self, 'diagnostics.period_s', 1.0, 'Period [s] of /diagnostics', read_only=True)
+        d(self, 'diagnostics.silent_warn_s', 2.0, 'WARN when a camera sent nothing for this '
+          'long [s] of node time', dynamic=True)
+        d(self, 'diagnostics.expected_rate_hz', 0.0, 'Expected input rate per camera [Hz] for '
+          'the frequency check; 0 = no check', dynamic=True)
+        mo = MarkerOptions()
+        d(self, 'markers.enabled', True, 'Publish ~/markers (only while subscribed)',
+          dynamic=True)
+        d(self, 'markers.lifetime_s', mo.lifetime_s, 'Marker lifetime [s] (safety net for a '
+          'stalled node)', dynamic=True)
+        d(self, 'markers.line_width_m', mo.line_width_m, 'Bone line width [m]', dynamic=True)
+        d(self, 'markers.joint_diameter_m', mo.joint_diameter_m, 'Joint sphere diameter [m]',
+          dynamic=True)
+        d(self, 'markers.text_height_m', mo.text_height_m, 'Label text height [m]',
+          dynamic=True)
+        d(self, 'markers.coasting_alpha', mo.coasting_alpha, 'Alpha of COASTING tracks',
+          dynamic=True)
+        d(self, 'markers.show_labels', mo.show_labels, 'Draw "<id> <state>" labels',
+          dynamic=True)
+        d(self, 'markers.show_velocity', mo.show_velocity, 'Draw root velocity arrows',
+          dynamic=True)
+
+    def _read_parameters(self) -> None:
+        v = self._value
+        self.rig_path = P.resolve_path(v('rig_config'), P.package_search_dirs())
+        if not v('rig_config'):
+            raise ConfigError('parameter rig_config is empty: set it to the rig calibration '
+                              'file (e.g. --ros-args -p rig_config:=config/rigs/my_rig.yaml)')
+        if not os.path.isfile(self.rig_path):
+            raise ConfigError(f'rig_config {v("rig_config")!r} not found (resolved to '
+                              f'{self.rig_path!r})')
+        try:
+            self.rig: Dict[str, Camera] = load_calibration(self.rig_path)
+        except (CalibrationError, OSError, ValueError) as exc:
+            raise ConfigError(f'cannot load rig_config: {exc}') from exc
+        ids = [c for c in (v('camera_ids') or []) if c]
+        if not ids:
+            ids = list(self.rig)
+        unknown = [c for c in ids if c not in self.rig]
+        if unknown:
+            raise ConfigError(f'camera_ids {unknown} are not in {self.rig_path} (its cameras: '
+                              f'{", ".join(self.rig)})')
+        if len(set(ids)) != len(ids):
+            raise ConfigError(f'camera_ids has duplicates: {ids}')
+        self.camera_ids = tuple(ids)
+        try:
+            self.layout = get_layout(v('layout'))
+        except ValueError as exc:
+            raise ConfigError(f'parameter layout: {exc}') from exc
+        self.input_topic = v('input_topic')
+        if '{camera}' not in self.input_topic and len(ids) > 1:
+            raise ConfigError(f'input_topic {self.input_topic!r} must contain {{camera}}')
+        self.input_reliability = v('input_reliability')
+        self.input_depth = int(v('input_depth'))
+        try:
+            sensor_qos(self.input_reliability, self.input_depth)
+        except ValueError as exc:
+            raise ConfigError(f'input QoS: {exc}') from exc
+        self.world_frame = v('world_frame')
+        self.intrinsics_source = v('intrinsics_source')
+        if self.intrinsics_source not in ('rig', 'camera_info'):
+            raise ConfigError(f'intrinsics_source must be rig or camera_info, got '
+                              f'{self.intrinsics_source!r}')
+        self.camera_info_topic = v('camera_info_topic')
+        try:
+            self.sync_config = SyncConfig(**{n: v(f'sync.{n}') for n in SYNC_FIELDS})
+            self.sync_config.slop_s = float(self.sync_config.slop_s)
+            self.sync_config.max_wait_s = float(self.sync_config.max_wait_s)
+            self.sync_config.backward_jump_s = float(self.sync_config.backward_jump_s)
+            self.sync_config.validate()
+            self.fusion_config = P.build_dataclass(self, FusionConfig, 'fusion')
+            self.fusion_config.validate()
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f'parameters: {exc}') from exc
+        if len(ids) < max(2, self.fusion_config.min_views):
+            raise ConfigError(f'{len(ids)} camera(s) {ids}: fusion needs at least '
+                              f'{max(2, self.fusion_config.min_views)}')
+        self.idle_flush_s = float(v('sync.idle_flush_s'))
+        self.max_future_ns = int(float(v('input_max_future_s')) * NS_PER_S)
+        self.log_throttle_s = float(v('log_throttle_s'))
+        self.diagnostics_period_s = float(v('diagnostics.period_s'))
+        self._read_dynamic()
+
+    def _read_dynamic(self) -> None:
+        v = self._value
+        self.publish_tentative = bool(v('publish_tentative'))
+        self.silent_warn_ns = int(float(v('diagnostics.silent_warn_s')) * NS_PER_S)
+        self.expected_rate_hz = float(v('diagnostics.expected_rate_hz'))
+        self.markers_enabled = bool(v('markers.enabled'))
+        self.marker_options = MarkerOptions(
+            lifetime_s=float(v('markers.lifetime_s')),
+            line_width_m=float(v('markers.line_width_m')),
+            joint_diameter_m=float(v('markers.joint_diameter_m')),
+            text_height_m=float(v('markers.text_height_m')),
+            coasting_alpha=float(v('markers.coasting_alpha')),
+            show_labels=bool(v('markers.show_labels')),
+            show_velocity=bool(v('markers.show_velocity')))
+
+    def _value(self, name: str) -> Any:
+        return P.value(self, name)
+
+    def _on_set_parameters(self, changes: List[Parameter]) -> SetParametersResult:
+        for p in changes:
+            if p.name.endswith('_s') or p.name.endswith('_m') or p.name.endswith('_hz') \
+                    or p.name.endswith('_alpha'):
+                if p.type_ in (Parameter.Type.DOUBLE, Parameter.Type.INTEGER) and (
+                        not math.isfinite(float(p.value)) or float(p.value) < 0):
+                    return SetParametersResult(successful=False,
+                                               reason=f'{p.name} must be finite and >= 0')
+        # Values are applied after the callback accepted them.
+        self._pending_dynamic = True
+        return SetParametersResult(successful=True)
+
+    def _publisher(self, msg_type: Any, topic: str, qos: Any) -> Any:
+        pub = self.create_publisher(msg_type, topic, qos,
+                                    event_callbacks=publisher_events(self, topic, qos))
+        self.get_logger().info(f'output {pub.topic_name} [{describe(qos)}]')
+        return pub
+
+    # ------------------------------------------------------------------ calibration
+    def _build_fusion(self) -> None:
+        cameras = {c: self.rig[c] for c in self.camera_ids}
+        self.fusion = Fusion(cameras, self.layout, self.fusion_config)
+        for c in self.camera_ids:
+            cam = cameras[c]
+            self.get_logger().info(
+                f'camera {c}: {cam.width}x{cam.height} px, f {cam.focal:.1f} px, centre '
+                f'{np.round(cam.center, 3).tolist()} m ({self.intrinsics_source} intrinsics)')
+
+    def _on_camera_info(self, cam: str, msg: CameraInfo) -> None:
+        with self._lock:
+            state = self.cams[cam]
+            if state.camera_info_received:
+                return
+            try:
+                camera = camera_from_info(self.rig[cam], msg)
+            except (CalibrationError, ValueError) as exc:
+                state.calibration_problem = f'CameraInfo rejected: {exc}'
+                self._rlog(f'{cam}:camera_info', f'camera {cam}: CameraInfo on '
+                           f'{self.resolve_topic_name(self.camera_info_topic.format(camera=cam))}'
+                           f' rejected: {exc}', self._now_ns())
+                return
+            rig_cam = self.rig[cam]
+            if (camera.width, camera.height) != (rig_cam.width, rig_cam.height):
+                self.get_logger().warning(
+                    f'camera {cam}: CameraInfo size {camera.width}x{camera.height} differs '
+                    f'from the rig file ({rig_cam.width}x{rig_cam.height}); using CameraInfo')
+            self.rig[cam] = camera
+            state.camera_info_received = True
+            state.calibration_problem = ''
+            if all(self.cams[c].camera_info_received for c in self.camera_ids):
+                self._build_fusion()
+                self.get_logger().info('intrinsics of every camera received: fusing')
+
+    # ------------------------------------------------------------------ input
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _reject(self, state: _Camera, reason: str, text: str, now_ns: int) -> None:
+        state.rejected[reason] += 1
+        self._rlog(f'{state.name}:{reason}', f'dropped Person2DArray of camera {state.name} '
+                   f'on {state.topic}: {text}', now_ns)
+
+    def _validate(self, state: _Camera, msg: Person2DArray, stamp_ns: int, now_ns: int):
+        """Return ``(poses, None)`` or ``(None, (reason, text))``."""
+        cam = state.name
+        if msg.camera_id and msg.camera_id != cam:
+            if msg.camera_id not in self.rig:
+                return None, ('unknown_camera', f'camera_id {msg.camera_id!r} is not in the rig '
+                              f'({", ".join(self.rig)})')
+            return None, ('wrong_camera', f'camera_id {msg.camera_id!r} arrived on the topic '
+                          f'of camera {cam!r} (remapping mistake?)')
+        if stamp_ns <= 0:
+            return None, ('zero_stamp', 'header stamp is zero (the publisher must copy the '
+                          'image capture stamp)')
+        if now_ns > 0 and stamp_ns > now_ns + self.max_future_ns:
+            return None, ('future_stamp', f'stamp {stamp_ns / NS_PER_S:.3f} s is '
+                          f'{(stamp_ns - now_ns) / NS_PER_S:.3f} s ahead of the node clock '
+                          f'(limit input_max_future_s)')
+        calib = self.rig[cam]
+        if msg.image_width and msg.image_height and (
+                msg.image_width != calib.width or msg.image_height != calib.height):
+            problem = (f'image_width x image_height {msg.image_width}x{msg.image_height} '
+                       f'differs from the calibration {calib.width}x{calib.height} '
+                       f'({self.rig_path})')
+            state.calibration_problem = problem
+            return None, ('image_size', problem)
+        layout_name = msg.layout or self.layout.name
+        try:
+            src = get_layout(layout_name)
+        except ValueError:
+            return None, ('unknown_layout', f'layout {msg.layout!r} unknown (known: '
+                          f'{", ".join(LAYOUT_NAMES)})')
+        try:
+            poses = person2d_array_to_numpy(msg, src.num_joints)
+        except InvalidMessage as exc:
+            text = str(exc)
+            reason = ('keypoint_count' if 'keypoint' in text else
+                      'non_finite' if 'NaN' in text or 'inf' in text else
+                      'confidence_range' if 'confidence' in text else 'invalid')
+            return None, (reason, text)
+        if src.name != self.layout.name and len(poses):
+            poses = convert_poses(poses, src, self.layout)
+            bad = ~np.isfinite(poses).all(axis=-1)
+            poses[bad] = 0.0
+        elif src.name != self.layout.name:
+            poses = np.zeros((0, self.layout.num_joints, 3))
+        if len(poses) == 0:
+            poses = poses.reshape(0, self.layout.num_joints, 3)
+        return poses, None
+
+    def _on_persons(self, cam: str, msg: Person2DArray) -> None:
+        with self._lock:
+            now = self._now_ns()
+            state = self.cams[cam]
+            state.received += 1
+            state.freq.tick()
+            state.last_rx_ns = now
+            self._last_rx_any_ns = now
+            stamp_ns = stamp_to_ns(msg.header.stamp)
+            state.stamps.record(stamp_ns, now)
+            if self.fusion is None:
+                waiting = [c for c in self.camera_ids if not self.cams[c].camera_info_received]
+                self._reject(state, 'no_calibration',
+                             f'waiting for CameraInfo of {", ".join(waiting)}', now)
+                return
+            poses, problem = self._validate(state, msg, stamp_ns, now)
+            if problem is not None:
+                self._reject(state, *problem, now)
+                return
+            result = self.sync.add(cam, stamp_ns, poses)
+            if result.reset:
+                self._reset(result.reason)
+            if not result.accepted:
+                self._reject(state, 'late', result.reason, now)
+                return
+            state.accepted += 1
+            for synced in result.sets:
+                self._process(synced)
+
+    def _idle_flush(self) -> None:
+        with self._lock:
+            if self.idle_flush_s <= 0 or self.sync.pending() == 0 or self.fusion is None:
+                return
+            now = self._now_ns()
+            if self._last_rx_any_ns is None or now - self._last_rx_any_ns < \
+                    self.idle_flush_s * NS_PER_S:
+                return
+            for synced in self.sync.flush():
+                self._process(synced)
+
+    def _on_time_jump(self, jump: Any) -> None:
+        with self._lock:
+            self._reset(f'node clock jumped back {-jump.delta.nanoseconds / NS_PER_S:.3f} s')
+
+    def _reset(self, why: str) -> None:
+        """Clear synchroniser and tracks; publish tombstones of the published tracks."""
+        self.counts['resets'] += 1
+        self.get_logger().warning(f'reset: {why}; synchroniser and tracks cleared')
+        if self.sync.pending():
+            self.sync.reset()
+        tombs = self.fusion.reset() if self.fusion is not None else []
+        tombs = [t for t in tombs if t.track_id in self._published_ids]
+        self._published_ids.clear()
+        self.last_tracks = []
+        if tombs and self._last_set_ns is not None:
+            self._publish(tombs, self._last_set_ns)
+        self._last_set_ns = None
+
+    # ------------------------------------------------------------------ fusion and output
+    def _process(self, synced: SyncedSet) -> None:
+        t0 = time.perf_counter()
+        try:
+            tracks = self.fusion.step(synced.messages, synced.stamp)
+        except Exception as exc:  # noqa: B902 - a core failure must not stop the node
+            self.counts['fusion_errors'] += 1
+            self._rlog('fusion_error', f'Fusion.step failed on the set at {synced.stamp:.6f} s '
+                       f'({exc!r}); tracks reset', self._now_ns())
+            self.fusion.reset()
+            self._published_ids.clear()
+            return
+        self.processing.add(time.perf_counter() - t0)
+        self.counts['sets'] += 1
+        if synced.missing:
+            self.counts['partial_sets'] += 1
+        self.last_tracks = [t for t in tracks if t.state != TrackState.DELETED]
+        out = []
+        for t in tracks:
+            if t.state == TrackState.DELETED:
+                if t.track_id in self._published_ids:
+                    self._published_ids.discard(t.track_id)
+                    out.append(t)
+            elif t.state != TrackState.TENTATIVE or self.publish_tentative:
+                self._published_ids.add(t.track_id)
+                out.append(t)
+        self._publish(out, synced.stamp_ns)
+        self._last_set_ns = synced.stamp_ns
+
+    def _publish(self, tracks: List[Track], stamp_ns: int) -> None:
+        if getattr(self, '_pending_dynamic', False):
+            self._pending_dynamic = False
+            self._read_dynamic()
+        header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)
+        self.tracks_pub.publish(tracks_to_msg(tracks, header, self.layout.name))
+        self.output_rate.tick()
+        self.latency.add((self._now_ns() - stamp_ns) / NS_PER_S)
+        if self.markers_enabled and self.markers_pub.get_subscription_count() > 0:
+            self.markers_pub.publish(tracks_to_markers(tracks, self.layout.bones, header,
+                                                       self.marker_options))
+
+    # ------------------------------------------------------------------ diagnostics
+    def _diag_inputs(self) -> List[Any]:
+        with self._lock:
+            now = self._now_ns()
+            out = []
+            for cam in self.camera_ids:
+                st = self.cams[cam]
+                ss = self.sync.stats[cam]
+                rate = st.freq
+                rate.min_hz = self.expected_rate_hz
+                rate.max_hz = self.expected_rate_hz if self.expected_rate_hz > 0 else math.inf
+                f_level, f_msg, values = rate.sample(now)
+                t_level, t_msg, t_values = st.stamps.sample()
+                values = {'topic': st.topic, **values, **t_values,
+                          'received': st.received, 'accepted': st.accepted,
+                          'used in sets': ss.used, 'dropped by sync': ss.dropped,
+                          'late': ss.late, 'missing from sets': ss.missing,
+                          'offset mean (ms)': ss.offset_mean_s * 1e3,
+                          'offset jitter (ms)': ss.offset_jitter_s * 1e3}
+                for reason, n in sorted(st.rejected.items()):
+                    values[f'rejected: {reason}'] = n
+                level, message = OK, 'receiving'
+                since = now - (st.last_rx_ns if st.last_rx_ns is not None else self._start_ns)
+                if since > self.silent_warn_ns:
+                    level = WARN
+                    message = f'no input on {st.topic} for {since / NS_PER_S:.1f} s'
+                elif st.calibration_problem:
+                    level, message = ERROR, st.calibration_problem
+                elif level_value(t_level) > level_value(OK):
+                    level, message = t_level, t_msg
+                elif level_value(f_level) > level_value(OK) and self.expected_rate_hz > 0:
+                    level, message = f_level, f_msg
+                new = st.rejected - st.rejected_reported
+                st.rejected_reported = Counter(st.rejected)
+                if level == OK and new:
+                    level = WARN
+                    message = 'dropped ' + ', '.join(f'{n} {r}' for r, n in sorted(new.items()))
+                out.append(make_status(self.diagnostics.name(f'{cam} input'), level, message,
+                                       hardware_id=cam, values=values))
+            return out
+
+    def _diag_pipeline(self) -> List[Any]:
+        with self._lock:
+            now = self._now_ns()
+            s = self.sync
+            values = {'sets emitted': s.sets_emitted, 'partial sets': s.partial_sets,
+                      'pivots dropped (too few views)': s.pivots_dropped,
+                      'pending messages': s.pending(), 'resets': self.counts['resets']}
+            sync_status = make_status(
+                self.diagnostics.name('synchronizer'), OK,
+                f'{s.sets_emitted} sets, {s.partial_sets} partial', values=values)
+            states = Counter(TrackState(t.state).name.lower() for t in self.last_tracks)
+            f_level, f_msg, rate = self.output_rate.sample(now)
+            values = {'active tracks': len(self.last_tracks),
+                      'confirmed tracks': states.get('confirmed', 0),
+                      'coasting tracks': states.get('coasting', 0),
+                      'tentative tracks': states.get('tentative', 0),
+                      'output frequency (Hz)': rate['Actual frequency (Hz)'],
+                      'latency median (ms)': self.latency.percentile(50) * 1e3,
+                      'latency p95 (ms)': self.latency.percentile(95) * 1e3,
+                      'processing median (ms)': self.processing.percentile(50) * 1e3,
+                      'processing p95 (ms)': self.processing.percentile(95) * 1e3,
+                      'fusion errors': self.counts['fusion_errors']}
+            level, message = OK, f'{len(self.last_tracks)} tracks'
+            if self.fusion is None:
+                level, message = WARN, 'waiting for calibration (CameraInfo)'
+            elif self.counts['fusion_errors']:
+                level, message = WARN, f'{self.counts["fusion_errors"]} fusion errors'
+            track_status = make_status(self.diagnostics.name('tracking'), level, message,
+                                       values=values)
+            problems = {c: self.cams[c].calibration_problem for c in self.camera_ids
+                        if self.cams[c].calibration_problem}
+            calib = make_status(
+                self.diagnostics.name('calibration'), ERROR if problems else OK,
+                '; '.join(f'{c}: {p}' for c, p in problems.items()) or
+                f'{len(self.camera_ids)} cameras from {self.rig_path}',
+                values={'rig_config': self.rig_path, **{f'{c} problem': p
+                                                        for c, p in problems.items()}})
+            return [sync_status, track_status, calib]
+
+
+def camera_from_info(rig_camera: Camera, msg: CameraInfo) -> Camera:
+    """Return ``rig_camera`` with the intrinsics of ``msg`` (errors name camera and field)."""
+    name = rig_camera.name
+    K = np.asarray(msg.k, dtype=np.float64).reshape(3, 3)
+    if not np.any(K):
+        raise CalibrationError('all zeros (uncalibrated camera driver)', camera=name,
+                               field='CameraInfo.k')
+    if msg.width == 0 or msg.height == 0:
+        raise CalibrationError(f'image size {msg.width}x{msg.height}', camera=name,
+                               field='CameraInfo.width/height')
+    model = msg.distortion_model or 'plumb_bob'
+    d = np.asarray(msg.d, dtype=np.float64)
+    if model not in ('plumb_bob', 'rational_polynomial') or len(d) > 5 and np.any(d[5:]):
+        raise CalibrationError(f'distortion model {model!r} with {len(d)} coefficients is not '
+                               'supported (plumb_bob only)', camera=name,
+                               field='CameraInfo.distortion_model')
+    dist = np.zeros(5)
+    dist[:min(5, len(d))] = d[:5]
+    return Camera(name=name, K=K, dist=dist, R=rig_camera.R, t=rig_camera.t,
+                  width=int(msg.width), height=int(msg.height))
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Entry point of the ``fusion_node`` console script."""
+    rclpy.init(args=args)
+    try:
+        node = FusionNode()
+    except ConfigError as exc:
+        rclpy.logging.get_logger('fusion_node').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
