@@ -130,11 +130,16 @@ class PoseEstimator:
         self.last_timing = Timing((t1 - t0) * 1e3, (t2 - t1) * 1e3, (t3 - t2) * 1e3)
         return dets
 
-    def _finish(self, kpts: np.ndarray, boxes: np.ndarray, scores: np.ndarray) -> Detections:
-        """Clip confidences, apply the keypoint threshold, cast to float32."""
+    def _finish(self, kpts: np.ndarray, boxes: np.ndarray, scores: np.ndarray,
+                box: Letterbox) -> Detections:
+        """
+        Clip confidences, apply the keypoint threshold, cast to float32.
+
+        Keypoints guessed outside the image get confidence 0: no camera saw them there.
+        """
         kpts = np.asarray(kpts, np.float32).reshape(-1, NUM_JOINTS, 3)
         conf = np.clip(np.nan_to_num(kpts[..., 2]), 0.0, 1.0)
-        conf[conf < self.keypoint_threshold] = 0.0
+        conf[(conf < self.keypoint_threshold) | ~box.inside(kpts[..., :2])] = 0.0
         kpts[..., 2] = conf
         return Detections(kpts, np.asarray(boxes, np.float32).reshape(-1, 4),
                           np.clip(np.asarray(scores, np.float32).reshape(-1), 0.0, 1.0))
@@ -188,7 +193,7 @@ class YoloPoseEstimator(PoseEstimator):
         kpts = rows[:, 5:5 + 3 * NUM_JOINTS].reshape(-1, NUM_JOINTS, 3)
         kpts[..., :2] = box.to_original(kpts[..., :2])
         boxes = box.to_original(boxes.reshape(-1, 2, 2)).reshape(-1, 4)
-        return self._finish(kpts, boxes, rows[:, 4])
+        return self._finish(kpts, boxes, rows[:, 4], box)
 
 
 class MoveNetEstimator(PoseEstimator):
@@ -216,11 +221,11 @@ class MoveNetEstimator(PoseEstimator):
         corners = np.stack([out[:, 52] * iw, out[:, 51] * ih, out[:, 54] * iw, out[:, 53] * ih],
                            axis=1)
         boxes = box.to_original(corners.reshape(-1, 2, 2)).reshape(-1, 4)
-        return self._finish(kpts, boxes, out[:, 55])
+        return self._finish(kpts, boxes, out[:, 55], box)
 
 
 _ADAPTERS = {'yolo-pose': YoloPoseEstimator, 'movenet-multipose': MoveNetEstimator}
-_DEFAULT_SCORE = {'yolo-pose': 0.25, 'movenet-multipose': 0.2}
+DEFAULT_SCORE = {'yolo-pose': 0.25, 'movenet-multipose': 0.2}
 _DEFAULT_SIZE = {'yolo-pose': (640, 640), 'movenet-multipose': (256, 256)}
 
 
@@ -328,7 +333,7 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
         size = tuple(int(v) for v in (input_size or sidecar.get('input_size')
                                       or _DEFAULT_SIZE[found]))
     licence = metadata.get('license') or sidecar.get('licence') or 'unknown'
-    thr = _DEFAULT_SCORE[found] if score_threshold is None else float(score_threshold)
+    thr = DEFAULT_SCORE[found] if score_threshold is None else float(score_threshold)
     return _ADAPTERS[found](session=session, path=path, input_size=size, score_threshold=thr,
                             keypoint_threshold=float(keypoint_threshold),
                             nms_iou=float(nms_iou), max_people=int(max_people),

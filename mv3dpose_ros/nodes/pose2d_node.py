@@ -1,0 +1,404 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+pose2d_node: one camera's ``sensor_msgs/Image`` -> ``mv3dpose_msgs/Person2DArray``.
+
+Topics (relative, so ``-r __ns:=/cam0`` puts them under the camera):
+
+- sub ``image`` (SensorDataQoS; reliability/depth overridable by ``image_qos.*``),
+  encodings bgr8 / rgb8 / mono8 (and 8UC3 / 8UC1); others are rejected with a rate-limited
+  error and counted.
+- pub ``persons_2d`` (RELIABLE, KEEP_LAST 10): one message per processed image, header copied
+  verbatim, also when empty; images with a zero stamp are rejected (no output).
+- pub ``skeleton_info`` (RELIABLE + TRANSIENT_LOCAL, depth 1): the coco17 layout, latched.
+- pub ``~/debug_image`` (bgr8): drawn only while someone subscribes.
+- pub ``/diagnostics``: input/output rate, inference and whole-path latency, drops, rejects.
+
+Only the newest image is processed: the subscription callback stores it in a one-slot mailbox
+(a replaced, never-processed image counts as dropped) and a worker thread runs inference
+(onnxruntime releases the GIL, so the executor keeps receiving meanwhile). The node is a
+lifecycle node: the model loads in ``on_configure``, the subscription exists while active;
+``autostart`` (default true) configures and activates it at start-up.
+"""
+
+import math
+import threading
+import time
+from typing import Any, List, Optional
+
+from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
+from mv3dpose_ros.core.skeleton import get_layout
+from mv3dpose_ros.pose2d.draw import draw_people
+from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError, open_estimator
+from mv3dpose_ros.pose2d.estimator import PoseEstimator
+from mv3dpose_ros.pose2d.models import ModelNotFound, parse_size, resolve_model_path
+from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
+                                          make_status, OK, RateLimitedLog, TimestampStats,
+                                          WARN, WindowStats)
+from mv3dpose_ros.ros.images import image_to_numpy, ImageError, numpy_to_image
+from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
+from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
+                                  sensor_qos, subscription_events)
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from sensor_msgs.msg import Image
+
+# name -> (default, description, dynamic)
+PARAMETERS = {
+    'camera_id': ('', 'rig camera name written into every Person2DArray; empty = the last '
+                      'component of the node namespace (e.g. cam0 under /cam0)', False),
+    'model.name': ('yolo11n-pose', 'registered model used when model.path is empty (see '
+                                   '`mv3dpose model list`)', False),
+    'model.path': ('', 'explicit ONNX file of a supported family (overrides model.name)', False),
+    'model.family': ('auto', 'auto | yolo-pose | movenet-multipose (auto reads the ONNX)', False),
+    'model.input_size': ('', "N or HxW: picks the registered model's size; for models with "
+                             'dynamic input it sets the size (empty = default)', False),
+    'model.cache_dir': ('', 'model cache (empty = $MV3DPOSE_MODEL_DIR or '
+                            '~/.cache/mv3dpose/models)', False),
+    'model.threads': (2, 'onnxruntime intra-op threads (0 = one per core)', False),
+    'score_threshold': (-1.0, '[DYNAMIC] minimum person score; < 0 = family default '
+                              '(YOLO 0.25, MoveNet 0.2)', True),
+    'keypoint_threshold': (0.0, '[DYNAMIC] keypoint confidences below this are published as 0',
+                           True),
+    'nms_iou': (0.7, '[DYNAMIC] IoU above which overlapping person boxes are merged (YOLO)',
+                True),
+    'max_people': (100, '[DYNAMIC] most people published per image', True),
+    'image_qos.reliability': ('best_effort', 'input QoS reliability: best_effort (REP-2003 '
+                                             'sensor data) | reliable | system_default', False),
+    'image_qos.depth': (5, 'input QoS history depth', False),
+    'output_qos.depth': (10, 'persons_2d QoS history depth (RELIABLE)', False),
+    'debug_image': (True, 'offer ~/debug_image (drawn only while subscribed)', False),
+    'debug_min_confidence': (0.3, '[DYNAMIC] keypoints drawn in the debug image from this '
+                                  'confidence', True),
+    'diagnostics_period_s': (1.0, '/diagnostics publish period [s]', False),
+    'min_rate_hz': (0.0, '[DYNAMIC] output rate below which diagnostics WARN (0 = off)', True),
+    'no_input_timeout_s': (5.0, '[DYNAMIC] WARN when no image arrived for this long [s]', True),
+    'autostart': (True, 'configure and activate at start-up (false: wait for lifecycle '
+                        'transitions)', False),
+}
+
+
+class Pose2DNode(LifecycleNode):
+    """Run a 2D multi-person pose model on one camera's images."""
+
+    def __init__(self, node_name: str = 'pose2d_node', **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        for name, (default, text, dynamic) in PARAMETERS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=text, read_only=not dynamic))
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.layout = get_layout('coco17')
+        self.estimator: Optional[PoseEstimator] = None
+        self.error = ''
+        self.camera_id = ''
+        self._sub = None
+        self._pub = self._info_pub = self._debug_pub = None
+        self._diag: Optional[Diagnostics] = None
+        self._worker: Optional[threading.Thread] = None
+        self._cv = threading.Condition()
+        self._pending: Optional[Image] = None
+        self._stop = False
+        self._stats_lock = threading.Lock()
+        self._reset_stats()
+        self._rl = RateLimitedLog(lambda text: self.get_logger().error(text), 5.0)
+        if self.get_parameter('autostart').value:
+            if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+                self.trigger_activate()
+
+    # -- state ----------------------------------------------------------------------------------
+    @property
+    def active(self) -> bool:
+        """Tell whether the node is in the active lifecycle state."""
+        return self._state_machine.current_state[1] == 'active'
+
+    def _reset_stats(self) -> None:
+        self.received = self.processed = self.dropped = 0
+        self.rejected_encoding = self.rejected_stamp = self.failed = 0
+        self.people_last = 0
+        self._in_freq, self._out_freq = FrequencyStats(), FrequencyStats()
+        self._stamps = TimestampStats()
+        self._infer_ms, self._path_ms = WindowStats(), WindowStats()
+        self._last_input_ns: Optional[int] = None
+        self._rejects_reported = 0
+
+    def _param(self, name: str) -> Any:
+        return self.get_parameter(name).value
+
+    def _on_set_parameters(self, params: List[Any]) -> SetParametersResult:
+        est = self.estimator
+        for p in params:
+            if p.name in ('nms_iou', 'keypoint_threshold', 'debug_min_confidence') and not (
+                    0.0 <= float(p.value) <= 1.0):
+                return SetParametersResult(successful=False, reason=f'{p.name} must be in [0, 1]')
+            if p.name == 'max_people' and int(p.value) < 1:
+                return SetParametersResult(successful=False, reason='max_people must be >= 1')
+        if est is not None:
+            for p in params:
+                if p.name == 'score_threshold':
+                    est.score_threshold = (float(p.value) if float(p.value) >= 0 else
+                                           DEFAULT_SCORE[est.family])
+                elif p.name in ('keypoint_threshold', 'nms_iou'):
+                    setattr(est, p.name, float(p.value))
+                elif p.name == 'max_people':
+                    est.max_people = int(p.value)
+        return SetParametersResult(successful=True)
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Load the model and create the publishers."""
+        ns_last = self.get_namespace().strip('/').split('/')[-1]
+        self.camera_id = self._param('camera_id') or ns_last or self.get_name()
+        try:
+            path = self._param('model.path')
+            if not path:
+                path = resolve_model_path(self._param('model.name'),
+                                          self._param('model.input_size') or None,
+                                          self._param('model.cache_dir') or None)
+            size = self._param('model.input_size')
+            thr = float(self._param('score_threshold'))
+            self.estimator = open_estimator(
+                path, family=self._param('model.family'),
+                threads=int(self._param('model.threads')),
+                input_size=parse_size(size) if size and self._param('model.path') else None,
+                score_threshold=thr if thr >= 0 else None,
+                keypoint_threshold=float(self._param('keypoint_threshold')),
+                nms_iou=float(self._param('nms_iou')), max_people=int(self._param('max_people')))
+        except (ModelError, ModelNotFound, ValueError) as exc:
+            self.error = str(exc)
+            self.get_logger().error(f'cannot load the pose model: {exc}')
+            return TransitionCallbackReturn.FAILURE
+        est = self.estimator
+        self.get_logger().info(
+            f'camera {self.camera_id}: {est.family} model {est.path} input '
+            f'{est.input_size[0]}x{est.input_size[1]} threads {self._param("model.threads")} '
+            f'score>{est.score_threshold:g}; weights licence: {est.licence}')
+        out_qos = reliable_qos(int(self._param('output_qos.depth')))
+        self._pub = self.create_publisher(Person2DArray, 'persons_2d', out_qos,
+                                          event_callbacks=publisher_events(
+                                              self, 'persons_2d', out_qos))
+        self._info_pub = self.create_publisher(SkeletonInfo, 'skeleton_info', latched_qos())
+        if self._param('debug_image'):
+            self._debug_pub = self.create_publisher(Image, '~/debug_image', reliable_qos(1))
+        self._diag = Diagnostics(self, float(self._param('diagnostics_period_s')))
+        self._diag.add_task(self._diagnose)
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Publish the skeleton info, subscribe to images and start the inference thread."""
+        info = skeleton_info_msg(self.layout)
+        info.header.stamp = self.get_clock().now().to_msg()
+        self._info_pub.publish(info)
+        self._stop = False
+        self._worker = threading.Thread(target=self._work, name=f'pose2d-{self.camera_id}',
+                                        daemon=True)
+        self._worker.start()
+        qos = sensor_qos(self._param('image_qos.reliability'), int(self._param('image_qos.depth')))
+        self._sub = self.create_subscription(Image, 'image', self._on_image, qos,
+                                             event_callbacks=subscription_events(self, 'image',
+                                                                                 qos))
+        self.get_logger().info(
+            f'{self.resolve_topic_name("image")} [{describe(qos)}] -> '
+            f'{self.resolve_topic_name("persons_2d")} [{describe(reliable_qos())}]')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop taking images and stop the inference thread."""
+        if self._sub is not None:
+            self.destroy_subscription(self._sub)
+            self._sub = None
+        self._stop_worker()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release the model and the publishers."""
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop everything."""
+        self.on_deactivate(state)
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        for pub in (self._pub, self._info_pub, self._debug_pub):
+            if pub is not None:
+                self.destroy_publisher(pub)
+        self._pub = self._info_pub = self._debug_pub = None
+        if self._diag is not None:
+            self._diag.destroy()
+            self._diag = None
+        self.estimator = None
+
+    def _stop_worker(self) -> None:
+        with self._cv:
+            self._stop = True
+            self._pending = None
+            self._cv.notify_all()
+        if self._worker is not None and self._worker is not threading.current_thread():
+            self._worker.join(timeout=5.0)
+        self._worker = None
+
+    def destroy_node(self) -> None:
+        """Stop the worker thread before the node goes."""
+        self._stop_worker()
+        super().destroy_node()
+
+    # -- data path ------------------------------------------------------------------------------
+    def _on_image(self, msg: Image) -> None:
+        """Keep only the newest image; count the one it replaces as dropped."""
+        now = self.get_clock().now().nanoseconds
+        with self._cv:
+            if self._pending is not None:
+                self.dropped += 1
+            self._pending = msg
+            self.received += 1
+            self._last_input_ns = now
+            self._in_freq.tick()
+            self._cv.notify()
+
+    def _work(self) -> None:
+        while True:
+            with self._cv:
+                while self._pending is None and not self._stop:
+                    self._cv.wait()
+                if self._stop:
+                    return
+                msg, self._pending = self._pending, None
+            try:
+                self.process(msg)
+            except Exception as exc:  # noqa: B902 - one bad frame must never stop the node
+                self.failed += 1
+                self._rl('failed', f'camera {self.camera_id}: inference failed: {exc!r}',
+                         self.get_clock().now().nanoseconds)
+
+    def process(self, msg: Image) -> Optional[Person2DArray]:
+        """Run the whole path on one image and publish; return the message (None if rejected)."""
+        t0 = time.perf_counter()
+        now = self.get_clock().now().nanoseconds
+        stamp = stamp_to_ns(msg.header.stamp)
+        with self._stats_lock:
+            self._stamps.record(stamp, now)
+        if stamp == 0:
+            self.rejected_stamp += 1
+            self._rl('stamp', f'camera {self.camera_id}: image with a zero header stamp on '
+                     f'{self.resolve_topic_name("image")} rejected: the driver must stamp images '
+                     'with their capture time (fusion synchronises on it)', now)
+            return None
+        try:
+            image, order = image_to_numpy(msg)
+        except ImageError as exc:
+            self.rejected_encoding += 1
+            self._rl('image', f'camera {self.camera_id}: image on '
+                     f'{self.resolve_topic_name("image")} rejected: {exc}', now)
+            return None
+        est = self.estimator
+        det = est.infer(image, order)
+        out = numpy_to_person2d_array(det.keypoints, msg.header, self.camera_id, msg.width,
+                                      msg.height, self.layout.name, det.boxes, det.scores)
+        pub = self._pub
+        if pub is None:
+            return out
+        pub.publish(out)
+        debug = self._debug_pub
+        if debug is not None and debug.get_subscription_count() > 0:
+            drawn = draw_people(image if order != 'rgb' else image[..., ::-1], det.keypoints,
+                                det.boxes, det.scores, self.layout.bones,
+                                float(self._param('debug_min_confidence')))
+            debug.publish(numpy_to_image(drawn, msg.header, 'bgr8'))
+        elapsed = (time.perf_counter() - t0) * 1e3
+        with self._stats_lock:
+            self.processed += 1
+            self.people_last = len(det)
+            self._out_freq.tick()
+            self._infer_ms.add(est.last_timing.infer_ms)
+            self._path_ms.add(elapsed)
+        return out
+
+    # -- diagnostics ----------------------------------------------------------------------------
+    def _diagnose(self) -> list:
+        now = self.get_clock().now().nanoseconds
+        with self._stats_lock:
+            out_level, out_text, values = self._out_freq.sample(now)
+            _, _, in_values = self._in_freq.sample(now)
+            ts_level, ts_text, ts_values = self._stamps.sample()
+            infer50, infer95 = self._infer_ms.percentile(50), self._infer_ms.percentile(95)
+            path50 = self._path_ms.percentile(50)
+        rate_in = in_values['Actual frequency (Hz)']
+        values = {'Input frequency (Hz)': rate_in, **values, **ts_values,
+                  'Inference latency median (ms)': infer50, 'Inference latency p95 (ms)': infer95,
+                  'Whole path median (ms)': path50, 'Images received': self.received,
+                  'Images processed': self.processed, 'Images dropped (newer arrived)':
+                  self.dropped, 'Rejected (encoding/size)': self.rejected_encoding,
+                  'Rejected (zero stamp)': self.rejected_stamp, 'Inference failures': self.failed,
+                  'People in last image': self.people_last}
+        est = self.estimator
+        if est is not None:
+            values.update({'Model': est.path, 'Model family': est.family,
+                           'Input size (HxW)': f'{est.input_size[0]}x{est.input_size[1]}',
+                           'Weights licence': est.licence})
+        level, text = OK, out_text
+        rejects = self.rejected_encoding + self.failed
+        timeout = float(self._param('no_input_timeout_s'))
+        min_rate = float(self._param('min_rate_hz'))
+        if level_value(ts_level) >= level_value(ERROR):
+            level, text = ERROR, ts_text
+        if rejects > self._rejects_reported:
+            level, text = ERROR, 'images rejected (see the log for why)'
+            self._rejects_reported = rejects
+        elif self._last_input_ns is None or now - self._last_input_ns > timeout * 1e9:
+            if level_value(level) < level_value(WARN):
+                level = WARN
+                text = (f'no input on {self.resolve_topic_name("image")} for {timeout:g} s '
+                        '(check the remapping, and the QoS: the publisher must be compatible '
+                        f'with {self._param("image_qos.reliability")})')
+        elif (min_rate > 0 and math.isfinite(values['Actual frequency (Hz)'])
+              and values['Actual frequency (Hz)'] < min_rate
+              and level_value(level) == level_value(OK)):
+            level, text = WARN, f'output rate below {min_rate:g} Hz'
+        elif self.dropped and level_value(level) == level_value(OK):
+            text = f'{out_text}; dropping frames (inference slower than the input)'
+        return [make_status(self._diag.name(f'{self.camera_id} inference'), level, text,
+                            hardware_id=self.camera_id, values=values)]
+
+
+def main(args: Optional[List[str]] = None) -> int:
+    """Run one pose2d node until interrupted; exit 1 when the model cannot be loaded."""
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = Pose2DNode()
+        if node.get_parameter('autostart').value and not node.active:
+            node.get_logger().fatal(f'not started: {node.error}')
+            code = 1
+        else:
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())
