@@ -34,7 +34,8 @@ from mv3dpose_ros.core.association import associate
 from mv3dpose_ros.core.camera import Camera, essential_matrix
 from mv3dpose_ros.core.skeleton import get_layout, Layout
 from mv3dpose_ros.core.smoothing import CausalFilter
-from mv3dpose_ros.core.tracking import pose_distance, Tracker, TrackerConfig, TrackRecord
+from mv3dpose_ros.core.tracking import (centroid, pose_distance, Tracker, TrackerConfig,
+                                        TrackRecord)
 from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, swap_pairs,
                                              swapped_views, triangulate_robust, Triangulation)
 from mv3dpose_ros.core.types import JointState, Track, TrackState
@@ -71,6 +72,9 @@ class FusionConfig:
     confirm_hits: int = 3                   # observations before a track is CONFIRMED
     max_coast_s: float = 1.0                # unobserved time before a track is DELETED
     min_birth_joints: int = 6               # triangulated joints to start a new track
+    min_birth_cameras_in_view: int = 3      # cameras whose image must contain a new track's
+    #                                         centroid (capped at cameras - 1): no tracks are
+    #                                         started outside the rig's shared working volume
     # causal smoothing
     smoothing: str = 'causal'               # 'causal' (alpha-beta per joint) or 'none'
     smoothing_alpha: float = 0.6            # position gain per update (1 = no smoothing)
@@ -86,7 +90,8 @@ class FusionConfig:
                         'tracking_gate_growth_mps', 'max_coast_s', 'smoothing_beta',
                         'max_gap_s')
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
-                        'min_candidate_joints', 'confirm_hits', 'min_birth_joints')
+                        'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
+                        'min_birth_cameras_in_view')
         for name, value in asdict(self).items():
             if isinstance(value, bool) or name == 'smoothing':
                 continue
@@ -145,6 +150,8 @@ class Fusion:
                     self._essentials[a, b] = essential_matrix(self.cameras[a], self.cameras[b])
         self._projections = np.stack([np.hstack([c.R, c.t[:, None]]) for c in self.cameras])
         self._focal = np.array([c.focal for c in self.cameras])
+        self._bounds = np.array([_normalised_bounds(c) for c in self.cameras])   # [C, 4]
+        self._birth_views = max(2, min(self.config.min_birth_cameras_in_view, num_c - 1))
         lay = self.layout
         self._bones = np.array(lay.bones, dtype=int).reshape(-1, 2)
         self._bone_lo, self._bone_hi = bone_length_limits(lay.joint_names, lay.bones)
@@ -192,10 +199,23 @@ class Fusion:
         self._last_stamp = stamp
         tri, members = self._reconstruct(views)
         self.last_poses = tri.joints
-        live, deleted = self.tracker.update(tri.joints, stamp)
+        live, deleted = self.tracker.update(tri.joints, stamp,
+                                            self.cameras_in_view(tri.joints) >= self._birth_views)
         out = [self._output(t, tri, members, stamp) for t in live]
         out.sort(key=lambda t: t.track_id)
         return out + out_tomb + [self._tombstone(t) for t in deleted]
+
+    def cameras_in_view(self, poses: np.ndarray) -> np.ndarray:
+        """Count, per pose ``[K, J, 3]``, the cameras whose image contains its joint centroid."""
+        centre = centroid(poses)                                            # [K, 3]
+        cam = np.einsum('cab,kb->kca', self._projections[:, :, :3], centre) \
+            + self._projections[None, :, :, 3]
+        with np.errstate(invalid='ignore', divide='ignore'):
+            x, y = cam[..., 0] / cam[..., 2], cam[..., 1] / cam[..., 2]
+            b = self._bounds
+            inside = (cam[..., 2] > 0) & (x >= b[:, 0]) & (x <= b[:, 1]) & (y >= b[:, 2]) \
+                & (y <= b[:, 3])
+        return inside.sum(axis=1)
 
     # ------------------------------------------------------------------ reconstruction
     def _warn(self, key: str, message: str) -> None:
@@ -416,3 +436,15 @@ def _subset(tri: Triangulation, keep: np.ndarray) -> Triangulation:
     return Triangulation(joints=tri.joints[keep], confidence=tri.confidence[keep],
                          num_views=tri.num_views[keep], error=tri.error[keep],
                          error_px=tri.error_px[keep], used=tri.used[keep])
+
+
+def _normalised_bounds(cam: Camera, samples: int = 9) -> np.ndarray:
+    """Return ``(x_min, x_max, y_min, y_max)`` of a box inside the undistorted image."""
+    s = np.linspace(0.0, 1.0, samples)
+    w, h = cam.width - 1.0, cam.height - 1.0
+    edges = [np.stack([np.zeros_like(s), s * h], 1), np.stack([np.full_like(s, w), s * h], 1),
+             np.stack([s * w, np.zeros_like(s)], 1), np.stack([s * w, np.full_like(s, h)], 1)]
+    left, right, top, bottom = (cam.undistort(e) for e in edges)
+    box = np.array([np.nanmax(left[:, 0]), np.nanmin(right[:, 0]),
+                    np.nanmax(top[:, 1]), np.nanmin(bottom[:, 1])])
+    return np.nan_to_num(box, nan=0.0)

@@ -129,14 +129,15 @@ class Tracker:
                 return r.mean(axis=0)
         return centroid(pose)
 
-    def update(self, poses: np.ndarray, stamp: float
+    def update(self, poses: np.ndarray, stamp: float, can_birth: Optional[np.ndarray] = None
                ) -> Tuple[List[TrackRecord], List[TrackRecord]]:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
 
         Returns ``(live, deleted)``: the live tracks after the update (``detection`` = index of
         their pose, -1 if not observed this time, new tracks included) and the tracks deleted
-        in this update (state DELETED, each reported once).
+        in this update (state DELETED, each reported once). Unmatched poses start tracks only
+        where ``can_birth [D]`` (default: all) holds and they have ``min_birth_joints``.
         """
         cfg = self.config
         num_det = len(poses)
@@ -170,7 +171,8 @@ class Tracker:
                 live.append(t)
         for d in np.nonzero(~used)[0]:
             pose = poses[d]
-            if np.isfinite(pose).all(axis=-1).sum() < cfg.min_birth_joints:
+            if np.isfinite(pose).all(axis=-1).sum() < cfg.min_birth_joints or (
+                    can_birth is not None and not can_birth[d]):
                 continue
             t = TrackRecord(track_id=self.next_id, state=TrackState.TENTATIVE,
                             pose=pose.copy(), first_seen=stamp, last_observed=stamp,
