@@ -35,12 +35,11 @@ import os
 from pathlib import Path
 import re
 import sys
-import tempfile
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import cv2
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, get_typestore
-from mv3dpose_ros.io.bag import make_qos, STORAGES
+from mv3dpose_ros.io.bag import make_qos, STORAGES, temp_path_beside
 import numpy as np
 
 IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp', '.tif', '.tiff', '.ppm', '.pgm')
@@ -444,10 +443,7 @@ def bag_to_jsonl(path: str, output: str, topic: Optional[str] = None, fps: float
     """
     from mv3dpose_ros.io.tracks_jsonl import TracksWriter
     out = Path(output)
-    if not out.parent.is_dir():
-        raise ConvertError(f'{output}: output folder {out.parent} does not exist')
-    fd, tmp = tempfile.mkstemp(prefix=f'.{out.name}.', suffix='.partial', dir=out.parent)
-    os.close(fd)
+    tmp = temp_path_beside(output)
     frames = 0
     ids = set()
     try:

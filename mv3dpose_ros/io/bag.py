@@ -33,6 +33,7 @@ import functools
 import os
 from pathlib import Path
 import shutil
+import tempfile
 from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Union
 
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
@@ -370,3 +371,22 @@ def bag_path_type(path: PathLike) -> str:
     if p.suffix in ('.mcap', '.db3'):
         return 'bag'
     return 'file'
+
+
+def temp_path_beside(output: PathLike) -> str:
+    """
+    Create an empty hidden temp file beside ``output`` (same folder, same suffix).
+
+    Writers fill it and ``os.replace`` it onto ``output`` when done, so a crash never leaves a
+    half-written file under the final name. Permissions follow the umask like ``open``.
+    """
+    out = Path(output)
+    if not out.parent.is_dir():
+        raise BagError(f'{output}: output folder {out.parent} does not exist')
+    fd, tmp = tempfile.mkstemp(prefix=f'.{out.stem}.', suffix=f'.partial{out.suffix}',
+                               dir=out.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    return tmp

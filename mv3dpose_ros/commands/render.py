@@ -1,0 +1,559 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+``mv3dpose render``: pictures of 3D tracks that a person can check at a glance.
+
+A picture shows one time point: the skeletons seen from above (with each track's path so far
+and the cameras of the rig) and from the side, in stable per-track colours with their ids;
+with images and a calibration, the skeletons are also reprojected onto every camera image.
+``--gif`` / ``--video`` animate the whole sequence. Only OpenCV and numpy are used.
+"""
+
+import argparse
+import math
+import os
+from pathlib import Path
+import sys
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+import cv2
+from mv3dpose_ros.core.types import JointState, TrackState
+import numpy as np
+
+# Distinct colours (BGR), Tableau-10 order; a track keeps its colour for its whole life.
+PALETTE = [(180, 119, 31), (14, 127, 255), (44, 160, 44), (40, 39, 214), (189, 103, 148),
+           (75, 86, 140), (194, 119, 227), (127, 127, 127), (34, 189, 188), (207, 190, 23)]
+BACKGROUND = (250, 250, 250)
+GRID = (225, 225, 225)
+AXIS_TEXT = (110, 110, 110)
+FONT = cv2.FONT_HERSHEY_SIMPLEX
+PANEL = 600           # [px] size of the top and side views
+
+
+class RenderError(ValueError):
+    """Input that cannot be rendered; the text names the file and the reason."""
+
+
+def track_colour(track_id: int) -> Tuple[int, int, int]:
+    """Return the BGR colour of a track id."""
+    return PALETTE[int(track_id) % len(PALETTE)]
+
+
+# ------------------------------------------------------------------------------------ input
+
+def load_frames(path: str, topic: Optional[str] = None) -> list:
+    """
+    Read a tracks JSON Lines file or a tracks bag into a list of ``TracksFrame``.
+
+    Bag frames are numbered by message order and carry the header stamp in seconds.
+    """
+    from mv3dpose_ros.io.bag import bag_path_type
+    from mv3dpose_ros.io.tracks_jsonl import frame_to_line, parse_line, read_tracks
+    if not os.path.exists(path):
+        raise RenderError(f'{path}: tracks file or bag does not exist')
+    if bag_path_type(path) == 'bag':
+        from mv3dpose_ros.commands.convert import tracks_from_bag
+        # one schema for both inputs: bag tracks go through the JSON Lines record type
+        return [parse_line(frame_to_line(i, tracks, layout, stamp * 1e-9))
+                for i, (stamp, layout, tracks) in enumerate(tracks_from_bag(path, topic))]
+    issues: List[str] = []
+    frames = list(read_tracks(path, issues))
+    if not frames:
+        reason = f': {issues[0]}' if issues else ''
+        raise RenderError(f'{path}: no frames of tracks{reason}')
+    return frames
+
+
+def _live(frame) -> list:
+    return [t for t in frame.tracks if t.state != TrackState.DELETED]
+
+
+def _joints_valid(track) -> np.ndarray:
+    ok = np.isfinite(track.joints).all(axis=1)
+    if track.joint_state is not None and len(track.joint_state) == len(ok):
+        ok &= np.asarray(track.joint_state) != JointState.MISSING
+    return ok
+
+
+def _layout_of(frames, layout: Optional[str]):
+    from mv3dpose_ros.core.skeleton import get_layout
+    name = layout or next((f.layout for f in frames if f.layout), None)
+    if not name:
+        raise RenderError('the tracks do not name their skeleton layout; pass --layout')
+    return get_layout(name)
+
+
+def _root(track, layout) -> np.ndarray:
+    """Return the hip midpoint, else the track's root position, else the joint mean."""
+    ok = _joints_valid(track)
+    a, b = layout.root_joints
+    if ok[a] and ok[b]:
+        return 0.5 * (track.joints[a] + track.joints[b])
+    pos = track.extra.get('position') if track.extra else None
+    if pos is not None and np.all(np.isfinite(pos)) and np.any(np.asarray(pos) != 0):
+        return np.asarray(pos, dtype=float)
+    return track.joints[ok].mean(axis=0) if ok.any() else np.full(3, np.nan)
+
+
+# ------------------------------------------------------------------------------------ views
+
+class View:
+    """A metric orthographic view: world axes (a, b) onto a panel, equal scale on both."""
+
+    def __init__(self, title: str, axes: Tuple[int, int], lo: np.ndarray, hi: np.ndarray,
+                 size: Tuple[int, int], names: Tuple[str, str]):
+        """Fit the box ``lo``..``hi`` (metres, two values each) into ``size`` (w, h) px."""
+        self.title, self.axes, self.names = title, axes, names
+        self.w, self.h = size
+        margin_top, margin = 34, 30
+        span = np.maximum(hi - lo, 1e-3)
+        self.scale = min((self.w - 2 * margin) / span[0], (self.h - margin_top - margin) / span[1])
+        centre = 0.5 * (lo + hi)
+        self.origin = np.array([self.w / 2, margin_top + (self.h - margin_top - margin) / 2])
+        self.centre = centre
+
+    def px(self, X: np.ndarray) -> np.ndarray:
+        """Map world points ``[..., 3]`` to panel pixels ``[..., 2]`` (second axis up)."""
+        X = np.asarray(X, dtype=float)
+        d = np.stack([X[..., self.axes[0]], X[..., self.axes[1]]], axis=-1) - self.centre
+        return self.origin + d * np.array([self.scale, -self.scale])
+
+    def blank(self) -> np.ndarray:
+        """Return the panel with its metre grid, axis names and title."""
+        img = np.full((self.h, self.w, 3), BACKGROUND, np.uint8)
+        half = np.array([self.w, self.h]) / (2 * self.scale)
+        lo, hi = self.centre - half, self.centre + half
+        step = 1.0 if max(hi - lo) > 3 else 0.5
+        for k, (a, b) in enumerate(zip(lo, hi)):
+            for v in np.arange(math.ceil(a / step) * step, b, step):
+                p = self.origin[k] + (v - self.centre[k]) * self.scale * (1 if k == 0 else -1)
+                p = int(round(p))
+                if k == 0:
+                    cv2.line(img, (p, 30), (p, self.h), GRID, 1)
+                    cv2.putText(img, f'{v:g}', (p + 2, self.h - 6), FONT, 0.35, AXIS_TEXT, 1,
+                                cv2.LINE_AA)
+                elif p > 30:
+                    cv2.line(img, (0, p), (self.w, p), GRID, 1)
+                    cv2.putText(img, f'{v:g}', (3, p - 3), FONT, 0.35, AXIS_TEXT, 1,
+                                cv2.LINE_AA)
+        cv2.putText(img, f'{self.names[0]} [m]', (self.w - 60, self.h - 20), FONT, 0.45,
+                    AXIS_TEXT, 1, cv2.LINE_AA)
+        cv2.putText(img, f'{self.names[1]} [m]', (22, 46), FONT, 0.45, AXIS_TEXT, 1,
+                    cv2.LINE_AA)
+        cv2.rectangle(img, (0, 0), (self.w, 26), (235, 235, 235), -1)
+        cv2.putText(img, self.title, (8, 19), FONT, 0.55, (40, 40, 40), 1, cv2.LINE_AA)
+        cv2.rectangle(img, (0, 0), (self.w - 1, self.h - 1), (200, 200, 200), 1)
+        return img
+
+
+def _draw_skeleton(img: np.ndarray, uv: np.ndarray, ok: np.ndarray, bones, colour,
+                   thickness: int, radius: int, predicted: Optional[np.ndarray] = None,
+                   dim: bool = False) -> None:
+    if dim:
+        colour = tuple(int(0.45 * c + 0.55 * 255) for c in colour)
+    pts = np.round(np.nan_to_num(uv)).astype(np.int64)
+    for a, b in bones:
+        if ok[a] and ok[b]:
+            cv2.line(img, tuple(map(int, pts[a])), tuple(map(int, pts[b])), colour, thickness,
+                     cv2.LINE_AA)
+    for j in np.flatnonzero(ok):
+        hollow = predicted is not None and predicted[j]
+        cv2.circle(img, tuple(map(int, pts[j])), radius, colour, 1 if hollow else -1,
+                   cv2.LINE_AA)
+
+
+def _label(img: np.ndarray, text: str, at: Sequence[float], colour, scale: float = 0.5,
+           thickness: int = 1) -> None:
+    x, y = int(round(at[0])), int(round(at[1]))
+    (tw, th), base = cv2.getTextSize(text, FONT, scale, thickness)
+    x = min(max(x - tw // 2, 0), img.shape[1] - tw - 1)
+    y = min(max(y, th + 2), img.shape[0] - base - 1)
+    cv2.rectangle(img, (x - 2, y - th - 2), (x + tw + 2, y + base), (255, 255, 255), -1)
+    cv2.putText(img, text, (x, y), FONT, scale, colour, thickness, cv2.LINE_AA)
+
+
+class Renderer:
+    """Draws frames of tracks; bounds are fixed over the sequence so animations do not jump."""
+
+    def __init__(self, frames: list, layout=None, cameras: Optional[Mapping] = None,
+                 panel: int = PANEL):
+        """Prepare views that fit every live joint of ``frames`` (and the camera centres)."""
+        self.frames = frames
+        self.layout = _layout_of(frames, layout)
+        self.cameras = dict(cameras or {})
+        pts = [t.joints[_joints_valid(t)] for f in frames for t in _live(f)]
+        pts = np.concatenate(pts) if pts else np.zeros((0, 3))
+        if len(pts) and pts.shape[1] != 3:
+            raise RenderError('joints are not 3D')
+        body = pts if len(pts) else np.array([[-1.0, -1.0, 0.0], [1.0, 1.0, 1.8]])
+        lo, hi = np.percentile(body, 0.5, axis=0), np.percentile(body, 99.5, axis=0)
+        top = [lo[:2] - 0.5, hi[:2] + 0.5]
+        if self.cameras:
+            centres = np.array([c.center for c in self.cameras.values()])
+            top = [np.minimum(top[0], centres[:, :2].min(0) - 0.4),
+                   np.maximum(top[1], centres[:, :2].max(0) + 0.4)]
+        top = _min_extent(top, 2.0)
+        side_lo = np.array([lo[0] - 0.4, min(0.0, lo[2]) - 0.1])
+        side_hi = np.array([hi[0] + 0.4, max(2.0, hi[2]) + 0.2])
+        self.top = View('top view (looking down)', (0, 1), top[0], top[1], (panel, panel),
+                        ('x', 'y'))
+        self.side = View('side view (looking along +y)', (0, 2),
+                         *_min_extent([side_lo, side_hi], 2.0), (panel, panel), ('x', 'z'))
+        self.roots: Dict[int, List[Tuple[int, np.ndarray]]] = {}
+        for i, f in enumerate(frames):
+            for t in _live(f):
+                r = _root(t, self.layout)
+                if np.all(np.isfinite(r)):
+                    self.roots.setdefault(t.id, []).append((i, r))
+
+    # -------------------------------------------------------------------- 3D views
+    def _views(self, index: int) -> np.ndarray:
+        frame = self.frames[index]
+        top, side = self.top.blank(), self.side.blank()
+        floor = np.round(self.side.px(np.array([[-1e3, 0, 0], [1e3, 0, 0]]))).astype(int)
+        cv2.line(side, tuple(floor[0]), tuple(floor[1]), (150, 150, 150), 2)  # the ground
+        for name, cam in self.cameras.items():
+            c = cam.center
+            axis = cam.R[2]  # optical axis in world coordinates
+            p = self.top.px(c)
+            q = self.top.px(c + 0.45 * axis / max(np.linalg.norm(axis[:2]), 1e-6))
+            cv2.arrowedLine(top, tuple(map(int, p)), tuple(map(int, q)), (90, 90, 90), 1,
+                            cv2.LINE_AA, tipLength=0.3)
+            cv2.circle(top, tuple(map(int, p)), 4, (60, 60, 60), -1, cv2.LINE_AA)
+            cv2.putText(top, name, (int(p[0]) + 5, int(p[1]) - 5), FONT, 0.38, (60, 60, 60), 1,
+                        cv2.LINE_AA)
+        for tid, path in self.roots.items():
+            pts = [r for i, r in path if i <= index]
+            if len(pts) > 1:
+                uv = np.round(self.top.px(np.array(pts))).astype(np.int32)
+                cv2.polylines(top, [uv.reshape(-1, 1, 2)], False, track_colour(tid), 1,
+                              cv2.LINE_AA)
+        for t in sorted(_live(frame), key=lambda t: -np.nanmean(t.joints[:, 1])):
+            ok = _joints_valid(t)
+            if not ok.any():
+                continue
+            colour = track_colour(t.id)
+            predicted = (np.asarray(t.joint_state) == JointState.PREDICTED
+                         if t.joint_state is not None else None)
+            dim = t.state == TrackState.COASTING
+            for view, img in ((self.top, top), (self.side, side)):
+                uv = view.px(t.joints)
+                _draw_skeleton(img, uv, ok, self.layout.bones, colour, 2, 3, predicted, dim)
+            head = t.joints[ok][np.argmax(t.joints[ok][:, 2])]
+            _label(side, f'#{t.id}', self.side.px(head) - [0, 12], colour, 0.5, 1)
+            _label(top, f'#{t.id}', self.top.px(t.joints[ok].mean(0)) - [0, 16], colour, 0.5, 1)
+        return np.hstack([top, side])
+
+    # -------------------------------------------------------------------- camera images
+    def _camera_tiles(self, index: int, images: Mapping[str, np.ndarray], width: int,
+                      columns: int) -> Optional[np.ndarray]:
+        names = [n for n in self.cameras if n in images]
+        if not names:
+            return None
+        frame = self.frames[index]
+        tile_w = width // columns
+        tiles = []
+        for name in names:
+            cam, img = self.cameras[name], images[name]
+            img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img.copy()
+            thick = max(2, int(round(img.shape[1] / 320)))
+            for t in _live(frame):
+                ok = _joints_valid(t)
+                if not ok.any():
+                    continue
+                uv = cam.project(t.joints)
+                ok = ok & np.isfinite(uv).all(axis=1)
+                if not ok.any():
+                    continue
+                _draw_skeleton(img, uv, ok, self.layout.bones, track_colour(t.id), thick,
+                               thick + 1, dim=t.state == TrackState.COASTING)
+                top = uv[ok][np.argmin(uv[ok][:, 1])]
+                _label(img, f'#{t.id}', top - [0, 3 * thick], track_colour(t.id),
+                       0.35 * thick, max(1, thick // 2))
+            scale = tile_w / img.shape[1]
+            tile = cv2.resize(img, (tile_w, int(round(img.shape[0] * scale))),
+                              interpolation=cv2.INTER_AREA)
+            cv2.rectangle(tile, (0, 0), (tile_w - 1, tile.shape[0] - 1), (200, 200, 200), 1)
+            _label(tile, name, (40, 18), (30, 30, 30), 0.5, 1)
+            tiles.append(tile)
+        h = max(t.shape[0] for t in tiles)
+        rows = []
+        for k in range(0, len(tiles), columns):
+            row = [np.pad(t, ((0, h - t.shape[0]), (0, 0), (0, 0)), constant_values=255)
+                   for t in tiles[k:k + columns]]
+            row += [np.full((h, tile_w, 3), 255, np.uint8)] * (columns - len(row))
+            rows.append(np.hstack(row))
+        grid = np.vstack(rows)
+        return np.pad(grid, ((0, 0), (0, width - grid.shape[1]), (0, 0)), constant_values=255)
+
+    def render(self, index: int, images: Optional[Mapping[str, np.ndarray]] = None,
+               title: str = '') -> np.ndarray:
+        """Return the BGR picture of frame ``index`` (3D views, then camera images)."""
+        frame = self.frames[index]
+        views = self._views(index)
+        live = sorted(_live(frame), key=lambda t: t.id)
+        bar = np.full((40, views.shape[1], 3), 255, np.uint8)
+        stamp = '' if frame.stamp is None else f'   t = {frame.stamp:.3f} s'
+        text = f'{title}   ' if title else ''
+        cv2.putText(bar, f'{text}frame {frame.frame}{stamp}   {len(live)} tracked',
+                    (10, 26), FONT, 0.6, (30, 30, 30), 1, cv2.LINE_AA)
+        cv2.putText(bar, 'hollow joint = predicted, pale = coasting', (views.shape[1] // 2 - 60,
+                    26), FONT, 0.42, AXIS_TEXT, 1, cv2.LINE_AA)
+        x = views.shape[1] - 10
+        for t in reversed(live):
+            label = f'#{t.id}'
+            (tw, _), _ = cv2.getTextSize(label, FONT, 0.6, 2)
+            x -= tw + 14
+            cv2.putText(bar, label, (x, 26), FONT, 0.6, track_colour(t.id), 2, cv2.LINE_AA)
+        parts = [bar, views]
+        if images:
+            columns = 3 if len(images) > 4 else max(1, min(2, len(images)))
+            tiles = self._camera_tiles(index, images, views.shape[1], columns)
+            if tiles is not None:
+                parts.append(tiles)
+        return np.vstack(parts)
+
+    def default_index(self) -> int:
+        """Pick the frame to show: the last one with the most live tracks."""
+        counts = [len(_live(f)) for f in self.frames]
+        best = max(counts) if counts else 0
+        return max(i for i, c in enumerate(counts) if c == best) if counts else 0
+
+
+def _min_extent(box, extent: float):
+    lo, hi = np.asarray(box[0], dtype=float), np.asarray(box[1], dtype=float)
+    grow = np.maximum(extent - (hi - lo), 0.0) / 2
+    return [lo - grow, hi + grow]
+
+
+# ------------------------------------------------------------------------------------ images
+
+class ImageSource:
+    """Per-camera images for each frame: folders (by time-point order) or an image bag (stamp)."""
+
+    def __init__(self, path: str, cameras: Sequence[str], frames: list):
+        """Index ``path`` (per-camera folders or an image bag) for the given frames."""
+        from mv3dpose_ros.io.bag import bag_path_type
+        self.path = path
+        self.frames = frames
+        self._bag: Dict[str, Dict[int, bytes]] = {}
+        self._table: Dict[str, list] = {}
+        if not os.path.exists(path):
+            raise RenderError(f'{path}: image folder or bag does not exist')
+        if bag_path_type(path) == 'bag':
+            self._index_bag(cameras)
+        else:
+            from mv3dpose_ros.commands.convert import _time_points, camera_sources
+            sources, _ = camera_sources(path, list(cameras), strict=False)
+            _, self._table = _time_points(
+                {c: p for c, p in sources.items() if os.path.isdir(p)})
+
+    def _index_bag(self, cameras: Sequence[str]) -> None:
+        from mv3dpose_ros.commands.convert import image_topic
+        from mv3dpose_ros.io.bag import BagReader
+        wanted = {image_topic(c): c for c in cameras}
+        with BagReader(self.path) as reader:
+            topics = [t for t in reader.topics() if t in wanted]
+            if not topics:
+                raise RenderError(f'{self.path}: no image topic of the calibrated cameras '
+                                  f'({", ".join(wanted)})')
+            stamps = {int(round(f.stamp * 1e9)) for f in self.frames if f.stamp is not None}
+            from mv3dpose_ros.io.bag import deserialize
+            for m in reader.messages(topics):
+                header = deserialize(m.data, m.msgtype).header
+                ns = header.stamp.sec * 10 ** 9 + header.stamp.nanosec
+                if _near(ns, stamps):
+                    self._bag.setdefault(wanted[m.topic], {})[_near(ns, stamps)] = m.data
+
+    def images(self, index: int) -> Dict[str, np.ndarray]:
+        """Return camera -> BGR image for frame ``index`` (cameras without one are left out)."""
+        out = {}
+        if self._bag:
+            from mv3dpose_ros.commands.convert import image_from_message
+            from mv3dpose_ros.io.bag import deserialize
+            stamp = self.frames[index].stamp
+            ns = None if stamp is None else int(round(stamp * 1e9))
+            for cam, by_stamp in self._bag.items():
+                data = by_stamp.get(ns)
+                if data is not None:
+                    out[cam] = image_from_message(deserialize(data, 'sensor_msgs/msg/Image'))
+            return out
+        for cam, files in self._table.items():
+            if index < len(files) and files[index] is not None:
+                img = cv2.imread(files[index], cv2.IMREAD_COLOR)
+                if img is None:
+                    raise RenderError(f'{files[index]}: not a readable image')
+                out[cam] = img
+        return out
+
+
+def _near(ns: int, stamps, tolerance_ns: int = 1_000_000) -> Optional[int]:
+    if ns in stamps:
+        return ns
+    best = min(stamps, key=lambda s: abs(s - ns), default=None)
+    return best if best is not None and abs(best - ns) <= tolerance_ns else None
+
+
+# ------------------------------------------------------------------------------------ output
+
+def _atomic_path(output: str) -> str:
+    from mv3dpose_ros.io.bag import BagError, temp_path_beside
+    try:
+        return temp_path_beside(output)
+    except BagError as exc:
+        raise RenderError(str(exc)) from exc
+
+
+def write_png(image: np.ndarray, output: str) -> str:
+    """Write a picture atomically (a temp file renamed into place)."""
+    tmp = _atomic_path(output)
+    try:
+        if not cv2.imwrite(tmp, image):
+            raise RenderError(f'{output}: OpenCV could not write the picture')
+        os.replace(tmp, output)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return output
+
+
+def write_animation(frames: Sequence[np.ndarray], output: str, fps: float,
+                    max_width: int = 720) -> str:
+    """Write an animated GIF (``.gif``) or a video (``.mp4``/``.avi``) atomically."""
+    if not frames:
+        raise RenderError(f'{output}: no frames to animate')
+    h, w = frames[0].shape[:2]
+    scale = min(1.0, max_width / w)
+    size = (int(w * scale) // 2 * 2, int(h * scale) // 2 * 2)
+    small = [cv2.resize(f, size, interpolation=cv2.INTER_AREA) for f in frames]
+    tmp = _atomic_path(output)
+    try:
+        if output.lower().endswith('.gif'):
+            anim = cv2.Animation()
+            anim.frames = small
+            anim.durations = [max(20, int(round(1000 / fps)))] * len(small)
+            anim.loop_count = 0
+            if not cv2.imwriteanimation(tmp, anim):
+                raise RenderError(f'{output}: OpenCV could not write the GIF')
+        else:
+            fourcc = cv2.VideoWriter_fourcc(*('mp4v' if output.lower().endswith('.mp4')
+                                              else 'MJPG'))
+            writer = cv2.VideoWriter(tmp, fourcc, fps, size)
+            if not writer.isOpened():
+                raise RenderError(f'{output}: OpenCV cannot write this video format')
+            for f in small:
+                writer.write(f)
+            writer.release()
+        os.replace(tmp, output)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return output
+
+
+def render_tracks(tracks: str, output: Optional[str] = None, gif: Optional[str] = None,
+                  video: Optional[str] = None, calibration: Optional[str] = None,
+                  images: Optional[str] = None, frame: Optional[int] = None,
+                  layout: Optional[str] = None, topic: Optional[str] = None, fps: float = 0.0,
+                  max_frames: int = 300, title: str = '', quiet: bool = False) -> dict:
+    """Render a tracks file or bag; return what was written and which frame the PNG shows."""
+    from tqdm import tqdm
+    frames = load_frames(tracks, topic)
+    if not frames:
+        raise RenderError(f'{tracks}: no frames of tracks')
+    cameras = None
+    if calibration:
+        from mv3dpose_ros.commands.convert import ConvertError, load_cameras
+        try:
+            cameras = load_cameras(calibration)
+        except ConvertError as exc:
+            raise RenderError(str(exc)) from exc
+    if images and not cameras:
+        raise RenderError('--images needs --calibration to reproject the skeletons')
+    renderer = Renderer(frames, layout, cameras)
+    source = ImageSource(images, list(cameras), frames) if images else None
+    if source is not None and cameras is not None:
+        used = set(source._table) | set(source._bag)
+        renderer.cameras = {n: c for n, c in cameras.items() if n in used} or cameras
+    result = {'frames': len(frames)}
+    if frame is not None and not -len(frames) <= frame < len(frames):
+        raise RenderError(f'{tracks}: frame index {frame} out of range (0..{len(frames) - 1})')
+    if output:
+        index = renderer.default_index() if frame is None else frame % len(frames)
+        imgs = source.images(index) if source else None
+        write_png(renderer.render(index, imgs, title), output)
+        result.update(png=output, png_frame=frames[index].frame, png_index=index)
+    if gif or video:
+        step = max(1, math.ceil(len(frames) / max_frames))
+        indices = list(range(0, len(frames), step))
+        if fps <= 0:
+            stamps = [f.stamp for f in frames if f.stamp is not None]
+            period = (np.median(np.diff(stamps)) if len(stamps) > 1 else 0.0) * step
+            fps = 1.0 / period if period > 0 else 10.0
+            fps = min(max(fps, 1.0), 30.0)
+        pictures = [renderer.render(i, source.images(i) if source else None, title)
+                    for i in tqdm(indices, desc='rendering', unit='frame', leave=False,
+                                  disable=True if quiet else None, file=sys.stderr)]
+        for target in (gif, video):
+            if target:
+                write_animation(pictures, target, fps)
+        result.update(gif=gif, video=video, animated_frames=len(indices), fps=fps)
+    return result
+
+
+# ------------------------------------------------------------------------------------ CLI
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the render options."""
+    parser.add_argument('tracks', help='tracks JSON Lines file or tracks bag')
+    parser.add_argument('-o', '--output', help='PNG of one frame (default: <tracks>.png)')
+    parser.add_argument('--gif', help='animated GIF of the sequence')
+    parser.add_argument('--video', help='MP4 (or AVI) of the sequence')
+    parser.add_argument('-c', '--calibration', help='calibration file: draws the cameras and, '
+                        'with --images, reprojects the skeletons')
+    parser.add_argument('--images', help='per-camera image folders or an image bag '
+                        '(folders: i-th time point = i-th frame of the tracks)')
+    parser.add_argument('--frame', type=int,
+                        help='frame index for the PNG (default: the last with most tracks)')
+    parser.add_argument('--layout', help='skeleton layout if the tracks do not name it')
+    parser.add_argument('--topic', help='track topic of a bag (default: the only one)')
+    parser.add_argument('--fps', type=float, default=0.0,
+                        help='animation speed (default: real time from the stamps)')
+    parser.add_argument('--max-frames', type=int, default=300,
+                        help='animate at most this many frames (evenly subsampled)')
+    parser.add_argument('--title', default='', help='text in the picture header')
+    parser.add_argument('-q', '--quiet', action='store_true')
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``mv3dpose render``."""
+    from mv3dpose_ros.io.bag import BagError
+    output = args.output
+    if not (output or args.gif or args.video):
+        output = str(Path(args.tracks.rstrip('/')).with_suffix('.png'))
+    try:
+        result = render_tracks(args.tracks, output, args.gif, args.video, args.calibration,
+                               args.images, args.frame, args.layout, args.topic, args.fps,
+                               args.max_frames, args.title, args.quiet)
+    except (RenderError, BagError, OSError, ValueError) as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    if result.get('png'):
+        print(f'wrote {result["png"]} (frame {result["png_frame"]} of {result["frames"]})')
+    for key in ('gif', 'video'):
+        if result.get(key):
+            print(f'wrote {result[key]} ({result["animated_frames"]} frames at '
+                  f'{result["fps"]:.1f} fps)')
+    return 0
