@@ -84,7 +84,7 @@ def load_campus_gt(path: str) -> CampusGroundTruth:
 
     try:
         mat = scipy.io.loadmat(path)
-    except (OSError, ValueError, TypeError) as e:
+    except Exception as e:   # scipy raises MatReadError, ValueError, OSError, ...
         raise DatasetError(f'{path}: cannot read MATLAB file: {e}') from None
     for key in ('actor3D', 'actor2D'):
         if key not in mat:
