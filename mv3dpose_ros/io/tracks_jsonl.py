@@ -78,6 +78,25 @@ def frame_to_line(frame: int, tracks: Sequence[Track], layout: str,
     return json.dumps(obj, separators=(',', ':'), allow_nan=False)
 
 
+def poses_to_line(frame: int, ids: Sequence[int], joints: np.ndarray, layout: str,
+                  stamp: Optional[float] = None, state: str = 'confirmed') -> str:
+    """
+    Serialise plain poses ``[N, J, 3]`` (NaN = missing) with ids as one line, e.g. ground truth.
+
+    Confidence is 1 for present joints, 0 for missing ones.
+    """
+    joints = np.asarray(joints, dtype=float).reshape(len(ids), -1, 3)
+    tracks = []
+    for i, pose in zip(ids, joints):
+        ok = np.isfinite(pose).all(-1)
+        tracks.append({'id': int(i), 'state': state,
+                       'joints': [_xyz(p) if v else None for p, v in zip(pose, ok)],
+                       'confidence': [1.0 if v else 0.0 for v in ok]})
+    obj = {'frame': int(frame), 'layout': layout, 'units': 'm',
+           'stamp': None if stamp is None else round(float(stamp), 6), 'tracks': tracks}
+    return json.dumps(obj, separators=(',', ':'), allow_nan=False)
+
+
 class TracksWriter:
     """Write frames of tracks to a JSON Lines file (a path or an open text stream)."""
 
@@ -112,7 +131,7 @@ class TracksWriter:
 class TrackRecord:
     """One track of one frame as read back: joints ``[J, 3]`` metres, NaN where null."""
 
-    id: int
+    id: int  # noqa: A003 (the JSON key; readers use it as t.id)
     state: TrackState
     joints: np.ndarray
     confidence: np.ndarray

@@ -1,0 +1,244 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+``mv3dpose track``: 3D tracks from per-camera OpenPose JSON folders, offline.
+
+Input: a calibration file (any format ``core.calibration`` reads) and a folder ``ROOT`` with
+one sub-folder of OpenPose JSON files per camera, named like the camera (loosely: Pose2Sim's
+``cam01_json`` is camera ``cam_01``). Frames are matched across cameras by the number in the
+file names; frame ``n`` gets the stamp ``n / fps`` seconds. Every frame goes through
+``Fusion.step``, the very code the live ``fusion_node`` runs, so both give the same tracks for
+the same inputs. ``--smooth offline`` runs fusion without the causal filter and then applies
+the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``).
+
+Output: JSON Lines, one line per frame (``io.tracks_jsonl``), including tentative tracks and
+one DELETED tombstone per ended track; consumers pick the states they want.
+"""
+
+import argparse
+import dataclasses
+import logging
+import os
+import sys
+import time
+from typing import Iterator, List, Tuple
+
+LOG = logging.getLogger('mv3dpose.track')
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of ``mv3dpose track``."""
+    parser.add_argument('--calibration', required=True, metavar='FILE',
+                        help='camera calibration (rig YAML, Panoptic/VoxelPose JSON, '
+                             'Pose2Sim TOML)')
+    parser.add_argument('--calibration-format', default='auto',
+                        help='calibration format (default: auto-detect)')
+    parser.add_argument('--poses', required=True, metavar='ROOT',
+                        help='folder with one OpenPose JSON folder per camera')
+    parser.add_argument('--layout', required=True,
+                        help='joint layout of the detections: coco17, body25, body25b, ...')
+    parser.add_argument('--output', '-o', required=True, metavar='FILE',
+                        help="tracks JSON Lines file ('-' = standard output)")
+    parser.add_argument('--fps', type=float, default=30.0,
+                        help='frame rate: frame n has stamp n / fps seconds (default 30)')
+    parser.add_argument('--smooth', choices=('causal', 'offline', 'none'), default='causal',
+                        help='causal: the live filter (default); offline: Gaussian smoothing '
+                             'of whole tracks; none: raw triangulation')
+    parser.add_argument('--sigma-frames', type=float, default=2.0,
+                        help='Gaussian sigma in frames for --smooth offline (paper: 2)')
+    parser.add_argument('--max-gap-frames', type=int, default=10,
+                        help='gaps filled by interpolation for --smooth offline')
+    parser.add_argument('--cameras', nargs='+', metavar='NAME',
+                        help='use only these calibrated cameras (default: all with a folder)')
+    parser.add_argument('--params', metavar='YAML',
+                        help='FusionConfig fields: a flat mapping, or a ROS parameter file '
+                             '(its fusion: section, e.g. config/fusion.yaml)')
+    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+
+
+def load_fusion_params(path: str) -> dict:
+    """
+    Read FusionConfig fields from YAML: a flat mapping or a ROS 2 parameter file.
+
+    In a parameter file the first ``ros__parameters`` section with a ``fusion`` mapping is
+    used. Unknown field names raise ValueError naming them and the file.
+    """
+    import yaml
+
+    from mv3dpose_ros.core.fusion import FusionConfig
+
+    with open(path, encoding='utf-8') as f:
+        data = yaml.safe_load(f)
+    if not isinstance(data, dict):
+        raise ValueError(f'{path}: expected a mapping of FusionConfig fields')
+
+    def find(node):
+        if isinstance(node, dict):
+            params = node.get('ros__parameters')
+            if isinstance(params, dict) and isinstance(params.get('fusion'), dict):
+                return params['fusion']
+            for v in node.values():
+                hit = find(v)
+                if hit is not None:
+                    return hit
+        return None
+
+    params = find(data)
+    if params is None:
+        params = data
+    known = {f.name for f in dataclasses.fields(FusionConfig)}
+    unknown = sorted(set(params) - known)
+    if unknown:
+        raise ValueError(f'{path}: unknown FusionConfig field(s) {unknown}; '
+                         f'known: {sorted(known)}')
+    return dict(params)
+
+
+def open_inputs(args) -> Tuple[dict, object, List[str]]:
+    """Load the calibration and index the pose folders; return (cameras, sequence, notes)."""
+    from mv3dpose_ros.core.calibration import load_calibration
+    from mv3dpose_ros.core.skeleton import get_layout
+    from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
+
+    layout = get_layout(args.layout)
+    cameras = load_calibration(args.calibration, args.calibration_format, cameras=args.cameras)
+    folders, missing = match_camera_folders(args.poses, list(cameras))
+    notes = list(missing)
+    if args.cameras and missing:
+        raise ValueError('; '.join(missing))
+    cameras = {name: cam for name, cam in cameras.items() if name in folders}
+    if len(cameras) < 2:
+        raise ValueError(f'need pose folders of at least two calibrated cameras under '
+                         f'{args.poses}; found {sorted(folders) or "none"}'
+                         + (f' ({"; ".join(missing)})' if missing else ''))
+    seq = OpenPoseSequence({name: folders[name] for name in cameras}, layout.num_joints)
+    if not len(seq):
+        raise ValueError(f'no OpenPose JSON files under {args.poses} '
+                         f'(folders: {", ".join(folders.values())})')
+    _check_layout(seq, layout)
+    return cameras, seq, notes
+
+
+def _check_layout(seq, layout) -> None:
+    """Fail early when the files hold another number of joints than the layout has."""
+    from mv3dpose_ros.core.skeleton import get_layout, LAYOUT_NAMES
+    from mv3dpose_ros.io.openpose import OpenPoseFormatError, read_openpose_file
+
+    for files in seq.files.values():
+        for path in list(files.values())[:20]:
+            try:
+                poses = read_openpose_file(path)
+            except OpenPoseFormatError:
+                continue
+            if len(poses) == 0:
+                continue
+            count = poses.shape[1]
+            if count != layout.num_joints:
+                fits = [n for n in LAYOUT_NAMES if get_layout(n).num_joints == count]
+                raise ValueError(f'{path} has {count} joints per person but layout '
+                                 f'{layout.name!r} has {layout.num_joints}; layouts with '
+                                 f'{count} joints: {", ".join(fits) or "none"}')
+            return
+
+
+def run_fusion(fusion, seq, fps: float, progress: bool = False
+               ) -> Iterator[Tuple[int, float, list]]:
+    """Yield ``(frame, stamp, tracks)`` for every frame of ``seq`` through ``fusion.step``."""
+    frames = seq.frames
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(frames), unit='frame', desc='tracking', file=sys.stderr)
+    try:
+        for frame in frames:
+            stamp = frame / fps
+            yield frame, stamp, fusion.step(seq.read(frame), stamp)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def run(args) -> int:
+    """Track, write the JSON Lines file, print a summary; return the exit code."""
+    from mv3dpose_ros.core.calibration import CalibrationError
+    from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+    from mv3dpose_ros.core.skeleton import get_layout
+    from mv3dpose_ros.core.smoothing import smooth_track_sequence
+    from mv3dpose_ros.core.types import JointState, TrackState
+    from mv3dpose_ros.io.tracks_jsonl import TracksWriter
+    import numpy as np
+
+    logging.basicConfig(level=logging.WARNING, format='%(levelname)s %(name)s: %(message)s')
+    if not args.fps > 0:
+        print(f'mv3dpose track: --fps must be positive, got {args.fps}', file=sys.stderr)
+        return 2
+    try:
+        layout = get_layout(args.layout)
+        params = load_fusion_params(args.params) if args.params else {}
+        if args.smooth == 'offline':
+            params['smoothing'] = 'none'
+        elif args.smooth in ('causal', 'none'):
+            params['smoothing'] = args.smooth
+        config = FusionConfig(**params)
+        cameras, seq, notes = open_inputs(args)
+        fusion = Fusion(cameras, layout.name, config)
+    except (CalibrationError, ValueError, FileNotFoundError, OSError, TypeError) as e:
+        print(f'mv3dpose track: {e}', file=sys.stderr)
+        return 2
+    for note in notes:
+        print(f'mv3dpose track: warning: {note}; that camera is not used', file=sys.stderr)
+    print(f'mv3dpose track: {len(seq)} frames (numbers {seq.frames[0]}..{seq.frames[-1]}), '
+          f'cameras {", ".join(cameras)}, layout {layout.name}, {args.fps:g} fps, '
+          f'smoothing {args.smooth}', file=sys.stderr)
+    progress = not args.no_progress and sys.stderr.isatty()
+    confirmed, reproj = set(), []
+    t0 = time.perf_counter()
+    out = sys.stdout if args.output == '-' else args.output
+    try:
+        if args.output != '-' and os.path.dirname(os.path.abspath(args.output)):
+            os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
+        with TracksWriter(out, layout.name) as writer:
+            frames = run_fusion(fusion, seq, args.fps, progress)
+            if args.smooth == 'offline':
+                done = list(frames)
+                smoothed = smooth_track_sequence([t for _, _, t in done], args.sigma_frames,
+                                                 args.max_gap_frames, layout.root_joints)
+                frames = ((f, s, t) for (f, s, _), t in zip(done, smoothed))
+            for frame, stamp, tracks in frames:
+                writer.write(frame, tracks, stamp)
+                for t in tracks:
+                    if t.state == TrackState.CONFIRMED:
+                        confirmed.add(t.track_id)
+                        err = t.reprojection_error[t.joint_state == JointState.TRIANGULATED]
+                        reproj.extend(err[np.isfinite(err)].tolist())
+    except OSError as e:
+        print(f'mv3dpose track: cannot write {args.output}: {e}', file=sys.stderr)
+        return 1
+    elapsed = time.perf_counter() - t0
+    med = f'{np.median(reproj):.1f} px' if reproj else 'n/a'
+    print(f'mv3dpose track: wrote {len(seq)} frames to {args.output} in {elapsed:.2f} s '
+          f'({1000 * elapsed / max(len(seq), 1):.2f} ms/frame); confirmed tracks: '
+          f'{len(confirmed)} (ids {sorted(confirmed)}); median reprojection error of '
+          f'confirmed joints {med}', file=sys.stderr)
+    if seq.issues:
+        print(f'mv3dpose track: skipped {len(seq.issues)} file(s):', file=sys.stderr)
+        for issue in seq.issues[:20]:
+            print(f'  {issue}', file=sys.stderr)
+        if len(seq.issues) > 20:
+            print(f'  ... and {len(seq.issues) - 20} more', file=sys.stderr)
+    return 0
