@@ -330,6 +330,9 @@ def test_missing_intrinsics_file(tmp_path):
     info['distortion_coefficients']['data'] = [0.1, 0, 0, 0, 0, 0, 0, 0]
     write(tmp_path, 'nowhere.yaml', info)
     assert load_calibration(write(tmp_path, 'rig.yaml', doc))['camA'].dist[0] == 0.1
+    doc['cameras']['camA'].update(distortion=[0.2, 0, 0, 0], K=[510, 510, 320, 240])
+    cam = load_calibration(write(tmp_path, 'rig.yaml', doc))['camA']   # inline overrides file
+    assert cam.dist[0] == 0.2 and cam.K[0, 0] == 510 and cam.width == 640
     del info['camera_matrix']
     write(tmp_path, 'nowhere.yaml', info)
     expect_error(write(tmp_path, 'rig.yaml', doc), 'camA', 'camera_matrix', 'missing')
