@@ -116,7 +116,7 @@ class FusionNode(Node):
         in_qos = sensor_qos(self.input_reliability, self.input_depth)
         self._subs = []
         for cam in self.camera_ids:
-            topic = self.input_topic.format(camera=cam)
+            topic = self._topic(self.input_topic, cam, 'input_topic')
             state = _Camera(cam, self.resolve_topic_name(topic))
             self.cams[cam] = state
             self._subs.append(self.create_subscription(
@@ -126,7 +126,7 @@ class FusionNode(Node):
         if self.intrinsics_source == 'camera_info':
             info_qos = sensor_qos('best_effort', 1)
             for cam in self.camera_ids:
-                topic = self.camera_info_topic.format(camera=cam)
+                topic = self._topic(self.camera_info_topic, cam, 'camera_info_topic')
                 self._subs.append(self.create_subscription(
                     CameraInfo, topic, lambda msg, c=cam: self._on_camera_info(c, msg),
                     info_qos, event_callbacks=subscription_events(self, topic, info_qos)))
@@ -160,7 +160,7 @@ class FusionNode(Node):
           'then the package source and share directories', read_only=True)
         d(self, 'camera_ids', [], 'Cameras to fuse (rig camera names); empty = every camera of '
           'the rig', read_only=True)
-        d(self, 'input_topic', '/{camera}/pose2d_node/persons_2d',
+        d(self, 'input_topic', '/{camera}/persons_2d',
           'Person2DArray topic per camera; {camera} is replaced by the camera id',
           read_only=True)
         d(self, 'input_reliability', 'reliable', 'QoS reliability of the inputs: reliable '
@@ -311,6 +311,18 @@ class FusionNode(Node):
         self._pending_dynamic = True
         return SetParametersResult(successful=True)
 
+    def _topic(self, pattern: str, cam: str, param: str) -> str:
+        """Return ``pattern`` for camera ``cam``; ConfigError if it is no valid topic name."""
+        topic = pattern.replace('{camera}', cam)
+        try:
+            self.resolve_topic_name(topic)
+        except Exception as exc:  # noqa: B902 - rclpy raises RCLError / ValueError variants
+            raise ConfigError(
+                f'{param} {pattern!r} gives the invalid topic {topic!r} for camera {cam!r} '
+                f'({exc}); ROS name tokens cannot start with a digit, so for numeric camera '
+                f"ids use a prefix, e.g. {param}:='/cam{{camera}}/...'") from exc
+        return topic
+
     def _publisher(self, msg_type: Any, topic: str, qos: Any) -> Any:
         pub = self.create_publisher(msg_type, topic, qos,
                                     event_callbacks=publisher_events(self, topic, qos))
@@ -395,9 +407,9 @@ class FusionNode(Node):
             poses = person2d_array_to_numpy(msg, src.num_joints)
         except InvalidMessage as exc:
             text = str(exc)
-            reason = ('keypoint_count' if 'keypoint' in text else
-                      'non_finite' if 'NaN' in text or 'inf' in text else
-                      'confidence_range' if 'confidence' in text else 'invalid')
+            reason = ('non_finite' if 'NaN' in text else
+                      'confidence_range' if 'confidence' in text else
+                      'keypoint_count' if 'keypoint' in text else 'invalid')
             return None, (reason, text)
         if src.name != self.layout.name and len(poses):
             poses = convert_poses(poses, src, self.layout)
