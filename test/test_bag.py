@@ -352,3 +352,43 @@ def test_play_topic_filter_and_start_offset(ros_context, tmp_path):
     assert chatter == [f'hello {i}' for i in range(5, n)]
     assert persons == []
     node.destroy_node()
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_pace_on_waits_for_a_slow_node(ros_context, tmp_path):
+    """A node that keeps only the newest message still sees every one with --pace-on."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    n = 12
+    _write_bag(tmp_path / 'bag', n=n, step_ns=1_000_000)
+    node = Node('bag_test_slow', context=ros_context)
+    newest_only = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                             reliability=ReliabilityPolicy.RELIABLE)
+    ack = node.create_publisher(String, '/ack', 10)
+    seen = []
+
+    def slow(msg):
+        time.sleep(0.1)   # busy: messages arriving meanwhile replace each other
+        seen.append(msg.data)
+        ack.publish(String(data=msg.data))
+    node.create_subscription(String, '/chatter', slow, newest_only)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    player = subprocess.Popen(
+        MV3DPOSE + ['bag', 'play', str(tmp_path / 'bag'), '--topics', '/chatter', '--rate', '0',
+                    '--pace-on', '/ack', '--pace-timeout', '20', '--wait-for-subscribers', '20',
+                    '-q'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        spin_until(executor, lambda: len(seen) >= n or player.poll() is not None, timeout=60)
+        _, stderr = player.communicate(timeout=30)
+    finally:
+        if player.poll() is None:
+            player.kill()
+    assert player.returncode == 0, stderr
+    assert seen == [f'hello {i}' for i in range(n)]
+    assert 'pace:' not in stderr
+    node.destroy_node()

@@ -258,18 +258,73 @@ def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = D
 
 # ------------------------------------------------------------------------------------ play
 
+class _Pacer:
+    """Counts messages on pace topics so the player can wait for slow downstream nodes."""
+
+    def __init__(self, node, topics: Sequence[str], known: Dict[str, str], timeout: float):
+        self.node, self.timeout = node, timeout
+        self.topics = list(topics)
+        self.known = dict(known)
+        self.counts = dict.fromkeys(self.topics, 0)
+        self.subs = {}
+        self.timeouts = 0
+
+    def subscribe_ready(self) -> bool:
+        """Subscribe to every pace topic whose type is known; tell if all are subscribed."""
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        graph = dict(self.node.get_topic_names_and_types())
+        for topic in self.topics:
+            if topic in self.subs:
+                continue
+            msgtype = self.known.get(topic) or (graph.get(topic) or [None])[0]
+            if msgtype is None:
+                continue
+            qos = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
+                             reliability=ReliabilityPolicy.BEST_EFFORT)
+
+            def count(_data, t=topic):
+                self.counts[t] += 1
+            self.subs[topic] = self.node.create_subscription(
+                import_msg_class(msgtype), topic, count, qos, raw=True)
+        return len(self.subs) == len(self.topics)
+
+    def wait(self, executor, target: int, stopped) -> float:
+        """Spin until every pace topic saw ``target`` messages (or the timeout); return wait."""
+        t0 = time.monotonic()
+        while not stopped() and time.monotonic() - t0 < self.timeout:
+            if all(c >= target for c in self.counts.values()):
+                break
+            executor.spin_once(timeout_sec=0.01)
+        else:
+            if not stopped():
+                self.timeouts += 1
+                late = [t for t, c in self.counts.items() if c < target]
+                self.node.get_logger().warning(
+                    f'pace: no message on {", ".join(late)} within {self.timeout:g} s; '
+                    'continuing')
+                for t in late:
+                    self.counts[t] = target   # do not wait for this one twice
+        return time.monotonic() - t0
+
+
 def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iterable[str]] = None,
          start_offset: float = 0.0, clock: bool = True, wait_for_subscribers: float = 0.0,
-         delay: float = 0.0, quiet: bool = False, context=None, stop=None) -> int:
+         delay: float = 0.0, quiet: bool = False, context=None, stop=None,
+         pace_topics: Optional[Sequence[str]] = None, pace_timeout: float = 30.0,
+         on_publish=None) -> int:
     """
     Publish the messages of the bag at ``path``; return how many were published.
 
     ``rate`` scales the pace (2 = twice as fast, 0 = as fast as possible); ``start_offset``
     skips the first seconds; ``wait_for_subscribers`` waits up to that many seconds until every
     played topic has a subscriber (nothing is lost to discovery); ``stop`` is an optional
-    callable polled between messages.
+    callable polled between messages. ``pace_topics``: after each time point (the messages
+    sharing one bag timestamp), wait until every pace topic delivered one more message (at
+    most ``pace_timeout`` s), so slow nodes that keep only the newest input lose nothing.
+    ``on_publish(topic, timestamp_ns)`` is called after each publication.
     """
     from rclpy.duration import Duration
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
@@ -288,6 +343,8 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
     if own_context:
         context = _init_rclpy()
     node = Node('mv3dpose_bag_player', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
     published = 0
     try:
         pubs = {}
@@ -300,27 +357,46 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
             clock_pub = node.create_publisher(
                 Clock, '/clock', QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
                                             reliability=ReliabilityPolicy.RELIABLE))
+        pacer = None
+        if pace_topics:
+            pacer = _Pacer(node, pace_topics, {t: s.msgtype for t, s in summary.items()},
+                           pace_timeout)
         with _StopFlag() as flag:
             def stopped() -> bool:
                 return flag.stop or not context.ok() or bool(stop and stop())
 
-            if wait_for_subscribers > 0:
-                deadline = time.monotonic() + wait_for_subscribers
-                while (time.monotonic() < deadline and not stopped()
-                       and any(p.get_subscription_count() == 0 for p in pubs.values())):
-                    time.sleep(0.05)
+            deadline = time.monotonic() + max(wait_for_subscribers, 0.0)
+            if pacer is not None:
+                deadline = time.monotonic() + max(wait_for_subscribers, pace_timeout)
+            while time.monotonic() < deadline and not stopped():
+                subscribed = (wait_for_subscribers <= 0 or
+                              all(p.get_subscription_count() > 0 for p in pubs.values()))
+                paced = pacer is None or pacer.subscribe_ready()
+                if subscribed and paced:
+                    break
+                executor.spin_once(timeout_sec=0.05)
+            if pacer is not None and len(pacer.subs) < len(pacer.topics):
+                missing = [t for t in pacer.topics if t not in pacer.subs]
+                raise BagError(f'pace topic {", ".join(missing)} never appeared')
             if delay > 0:
                 time.sleep(delay)
             start_ns = reader.start_ns + int(round(start_offset * 1e9))
             total = sum(summary[t].count for t in chosen)
             bar = _progress(total if not loop else None, f'playing {path}',
                             disable=True if quiet else None)
+            groups = 0
             try:
                 while not stopped():
                     wall0 = time.monotonic()
+                    group_stamp = None
                     for m in reader.messages(chosen, start_ns=start_ns if start_offset else None):
                         if stopped():
                             break
+                        if pacer is not None and group_stamp is not None \
+                                and m.timestamp != group_stamp:
+                            groups += 1
+                            wall0 += pacer.wait(executor, groups, stopped)
+                        group_stamp = m.timestamp
                         if rate > 0:
                             due = wall0 + (m.timestamp - start_ns) * 1e-9 / rate
                             while not stopped():
@@ -334,7 +410,12 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
                             clock_pub.publish(msg)
                         pubs[m.topic].publish(m.data)
                         published += 1
+                        if on_publish is not None:
+                            on_publish(m.topic, m.timestamp)
                         bar.update(1)
+                    if pacer is not None and group_stamp is not None and not stopped():
+                        groups += 1
+                        pacer.wait(executor, groups, stopped)
                     if not loop:
                         break
             finally:
@@ -344,6 +425,7 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
                 pub.wait_for_all_acked(Duration(seconds=2.0))
     finally:
         reader.close()
+        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         if own_context:
             context.try_shutdown()
@@ -428,6 +510,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ply.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
                      help='wait up to this long until every topic has a subscriber')
     ply.add_argument('--delay', type=float, default=0.0, help='sleep before playing [s]')
+    ply.add_argument('--pace-on', nargs='+', metavar='TOPIC',
+                     help='after each time point wait until every TOPIC delivered one more '
+                          'message (replay at the speed of the slowest node, dropping nothing)')
+    ply.add_argument('--pace-timeout', type=float, default=30.0,
+                     help='longest wait for a pace topic [s]')
     ply.add_argument('-q', '--quiet', action='store_true')
 
     inf = sub.add_parser('info', help='print topics, types, counts, duration and storage')
@@ -455,7 +542,8 @@ def run(args: argparse.Namespace) -> int:
             n = play(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
                      start_offset=args.start_offset, clock=args.clock,
                      wait_for_subscribers=args.wait_for_subscribers, delay=args.delay,
-                     quiet=args.quiet)
+                     quiet=args.quiet, pace_topics=args.pace_on,
+                     pace_timeout=args.pace_timeout)
             if not args.quiet:
                 print(f'played {n} messages from {args.bag}')
             return 0
