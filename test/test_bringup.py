@@ -1,0 +1,155 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+bringup: the plan it derives from one rig, and a real run stopped with SIGINT.
+
+The real run uses a crafted constant-output ONNX model (see ``test_pose2d_node``), so no
+model download is needed: images in, ``persons_2d`` per camera, ``tracks`` from fusion.
+"""
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
+from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.ros.images import numpy_to_image
+from mv3dpose_ros.ros.messages import ns_to_stamp
+from mv3dpose_ros.ros.qos import reliable_qos
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+import yaml
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+W, H = 320, 240
+CAMS = ('cam_a', 'cam_b')
+
+
+@pytest.fixture
+def rig(tmp_path):
+    K = np.array([[300.0, 0, W / 2], [0, 300.0, H / 2], [0, 0, 1]])
+    cams = {n: Camera.look_at(n, K, eye, (0, 0, 1), W, H)
+            for n, eye in zip(CAMS, ((4, 0, 2), (0, 4, 2)))}
+    path = str(tmp_path / 'rig.yaml')
+    save_rig_yaml(cams, path)
+    return path
+
+
+def bringup(*args, **kw):
+    return subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.bringup', *args],
+                          capture_output=True, text=True, timeout=60, cwd=ROOT, **kw)
+
+
+def test_dry_run_plans_one_pose2d_node_per_camera(rig):
+    res = bringup('--rig', rig, '--dry-run', '--image-topic', '/{camera}/image_raw',
+                  '--pose2d-param', 'model.threads:=1', '--fusion-param', 'sync.slop_s:=0.02',
+                  '--use-sim-time')
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    for cam in CAMS:
+        (line,) = [ln for ln in lines if ln.startswith(f'pose2d_node[{cam}]:')]
+        assert f'__ns:=/{cam}' in line and f'image:=/{cam}/image_raw' in line
+        assert line.count('--params-file') == 3
+    (fusion,) = [ln for ln in lines if ln.startswith('fusion_node:')]
+    assert '__ns' not in fusion
+    overrides = yaml.safe_load(res.stdout.split('(passed last):\n', 1)[1])
+    f = overrides['/**/fusion_node']['ros__parameters']
+    assert f['rig_config'] == rig and f['camera_ids'] == list(CAMS)
+    assert f['input_topic'] == '/{camera}/persons_2d' and f['sync'] == {'slop_s': 0.02}
+    assert overrides['/cam_b/pose2d_node']['ros__parameters'] == {
+        'model': {'threads': 1}, 'camera_id': 'cam_b'}
+    assert overrides['/**']['ros__parameters'] == {'use_sim_time': True}
+
+
+def test_bad_rig_and_cameras_fail_with_clear_messages(rig, tmp_path):
+    res = bringup('--rig', str(tmp_path / 'missing.yaml'), '--dry-run')
+    assert res.returncode != 0 and 'cannot load rig' in res.stderr
+    res = bringup('--rig', rig, '--cameras', 'cam_a', 'cam_z', '--dry-run')
+    assert res.returncode != 0 and "cameras ['cam_z'] are not in" in res.stderr
+
+
+@pytest.mark.ros
+def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from test_pose2d_node import _crafted_model
+    model, _ = _crafted_model(tmp_path)
+    log_path = tmp_path / 'bringup.log'
+    log = open(log_path, 'w')
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'mv3dpose_ros.nodes.bringup', '--rig', rig,
+         '--pose2d-param', f'model.path:={model}', '--pose2d-param', 'model.threads:=1',
+         '--pose2d-param', 'image_qos.reliability:=reliable', '--stop-timeout', '10'],
+        stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
+    node = rclpy.create_node('bringup_probe', context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    persons = {c: [] for c in CAMS}
+    tracks = []
+    for c in CAMS:
+        node.create_subscription(Person2DArray, f'/{c}/persons_2d', persons[c].append,
+                                 reliable_qos())
+    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', tracks.append,
+                             reliable_qos())
+    pubs = {c: node.create_publisher(Image, f'/{c}/image', reliable_qos(5)) for c in CAMS}
+
+    def spin_until(pred, timeout):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not pred():
+            ex.spin_once(timeout_sec=0.05)
+            assert proc.poll() is None, log_path.read_text()
+        return pred()
+
+    try:
+        ready = spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()) and
+                           node.count_subscribers('/cam_a/persons_2d') >= 2, 60.0)
+        assert ready, log_path.read_text()
+        rng = np.random.default_rng(0)
+        start = time.time_ns() - 2_000_000_000
+        for k in range(5):
+            header = Header(stamp=ns_to_stamp(start + k * 100_000_000))
+            for c in CAMS:
+                header.frame_id = f'{c}_optical_frame'
+                pubs[c].publish(numpy_to_image(
+                    rng.integers(0, 255, (H, W, 3), dtype=np.uint8), header))
+            spin_until(lambda: all(len(v) > k for v in persons.values()), 10.0)
+        assert spin_until(lambda: len(tracks) >= 3, 20.0), log_path.read_text()
+        assert all(m.camera_id == c for c in CAMS for m in persons[c])
+        assert tracks[-1].header.frame_id == 'map'
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            code = proc.wait(timeout=40)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            code = proc.wait()
+        log.close()
+        ex.shutdown()
+        node.destroy_node()
+    text = log_path.read_text()
+    assert code == 0, text
+    assert 'all nodes stopped cleanly' in text
+    pids = [int(p) for p in re.findall(r'started \S+ \(pid (\d+)\)', text)]
+    assert len(pids) == 3
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
