@@ -67,10 +67,13 @@ def latched_qos() -> QoSProfile:
 
 def describe(profile: QoSProfile) -> str:
     """Return a short human-readable profile, e.g. ``RELIABLE VOLATILE KEEP_LAST(10)``."""
-    history = profile.history.name
+    parts = [profile.reliability.name, profile.durability.name]
     if profile.history == QoSHistoryPolicy.KEEP_LAST:
-        history += f'({profile.depth})'
-    return f'{profile.reliability.name} {profile.durability.name} {history}'
+        parts.append(f'KEEP_LAST({profile.depth})')
+    elif profile.history == QoSHistoryPolicy.KEEP_ALL:
+        parts.append('KEEP_ALL')
+    # Remote endpoints' history is not sent by discovery (UNKNOWN): leave it out.
+    return ' '.join(parts)
 
 
 def _describe_endpoints(infos: Iterable[Any]) -> str:

@@ -1,0 +1,184 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Benchmark the running fusion_node: latency from capture stamp to output, and its CPU share.
+
+For each configuration (default 5 cameras x 4 people and 16 x 6, 30 Hz) a synthetic scene is
+published by this process as per-camera ``Person2DArray`` streams, stamped with the wall
+clock at publication (so pose2d latency is excluded: this is the fusion node's own share),
+into ``fusion_node`` started as a separate process with the shipped params file. Printed:
+
+- node latency: capture stamp -> ``~/tracks`` publish, measured inside the node (its
+  ``/diagnostics`` median / p95 over the last 300 sets);
+- end-to-end latency: capture stamp -> receipt of ``~/tracks`` by this process (adds DDS);
+- node CPU: (user + system) CPU time of the node process over the run / wall time, in % of
+  one core (from /proc), and its processing time per set;
+- the output rate and the sets emitted / partial.
+
+Usage: ``python bench/bench_fusion_node.py [--seconds 10] [--configs 5x4,16x6] [--rate 30]``
+"""
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
+from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array, stamp_to_ns
+from mv3dpose_ros.ros.qos import reliable_qos
+from mv3dpose_ros.sim.people import WalkConfig
+from mv3dpose_ros.sim.rig import RigConfig
+from mv3dpose_ros.sim.scene import make_scene
+import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from std_msgs.msg import Header
+import yaml
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TICKS = os.sysconf('SC_CLK_TCK')
+
+
+def cpu_seconds(pid: int) -> float:
+    """Return user + system CPU seconds of process ``pid`` (Linux /proc)."""
+    with open(f'/proc/{pid}/stat') as f:
+        fields = f.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
+def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0) -> dict:
+    frames = int(seconds * rate)
+    radius = 6.0 if people <= 8 else 9.0
+    scene = make_scene(num_cameras=cams, num_people=people, num_frames=frames, fps=rate,
+                       seed=seed, rig=RigConfig(num_cameras=cams, radius_m=radius),
+                       walk=WalkConfig(area_radius_m=radius * 0.5))
+    tmp = tempfile.mkdtemp(prefix='bench_fusion_node_')
+    rig = os.path.join(tmp, 'rig.yaml')
+    save_rig_yaml(scene.cameras, rig)
+    over = os.path.join(tmp, 'override.yaml')
+    with open(over, 'w') as f:
+        yaml.safe_dump({'/**/fusion_node': {'ros__parameters': {
+            'rig_config': rig, 'camera_ids': list(scene.cameras),
+            'sync': {'slop_s': 0.5 / rate}, 'diagnostics': {'period_s': 1.0}}}}, f)
+    log = open(os.path.join(tmp, 'fusion_node.log'), 'w')
+    proc = subprocess.Popen(['fusion_node', '--ros-args', '--params-file',
+                             os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file',
+                             over], stdout=log, stderr=subprocess.STDOUT)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node('bench_feeder', context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    e2e, diags, tracks = [], [], []
+
+    def on_tracks(msg: TrackedSkeletonArray) -> None:
+        e2e.append((time.time_ns() - stamp_to_ns(msg.header.stamp)) / 1e6)
+        tracks.append(len(msg.skeletons))
+
+    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', on_tracks,
+                             reliable_qos(100))
+    node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, reliable_qos(20))
+    pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(10))
+            for c in scene.cameras}
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not all(
+                p.get_subscription_count() for p in pubs.values()):
+            ex.spin_once(timeout_sec=0.05)
+            if proc.poll() is not None:
+                raise RuntimeError(open(log.name).read())
+        # Pre-build the messages so the feeder's own cost stays small; stamps set at send.
+        msgs = [{c: numpy_to_person2d_array(v, Header(frame_id=c), c, scene.cameras[c].width,
+                                            scene.cameras[c].height, scene.layout)
+                 for c, v in views.items()} for views in scene.views]
+        cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
+        period = 1.0 / rate
+        next_t = time.monotonic()
+        for f in range(frames):
+            stamp = ns_to_stamp(time.time_ns())
+            for c, m in msgs[f].items():
+                m.header.stamp = stamp
+                pubs[c].publish(m)
+            next_t += period
+            while True:
+                left = next_t - time.monotonic()
+                if left <= 0:
+                    break
+                ex.spin_once(timeout_sec=min(left, 0.005))
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end and len(e2e) < frames:
+            ex.spin_once(timeout_sec=0.02)
+        cpu1, wall1 = cpu_seconds(proc.pid), time.monotonic()
+        diags.clear()
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end and not any(
+                s.name.endswith('tracking') for a in diags for s in a.status):
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        proc.send_signal(2)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    values = {}
+    for arr in diags:
+        for s in arr.status:
+            if s.name.endswith('tracking') or s.name.endswith('synchronizer'):
+                values.update({kv.key: kv.value for kv in s.values})
+    lat = np.array(e2e[5:]) if len(e2e) > 10 else np.array(e2e)
+    return {'cams': cams, 'people': people, 'frames': frames, 'received': len(e2e),
+            'node_median_ms': values.get('latency median (ms)', 'n/a'),
+            'node_p95_ms': values.get('latency p95 (ms)', 'n/a'),
+            'proc_median_ms': values.get('processing median (ms)', 'n/a'),
+            'proc_p95_ms': values.get('processing p95 (ms)', 'n/a'),
+            'e2e_median_ms': float(np.median(lat)) if len(lat) else float('nan'),
+            'e2e_p95_ms': float(np.percentile(lat, 95)) if len(lat) else float('nan'),
+            'cpu_pct': 100.0 * (cpu1 - cpu0) / (wall1 - wall0),
+            'sets': values.get('sets emitted', 'n/a'), 'partial': values.get('partial sets'),
+            'mean_tracks': float(np.mean(tracks[-30:])) if tracks else 0.0}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--seconds', type=float, default=10.0)
+    parser.add_argument('--rate', type=float, default=30.0)
+    parser.add_argument('--configs', default='5x4,16x6', help='CAMSxPEOPLE,...')
+    args = parser.parse_args()
+    print(f'fusion_node benchmark: {args.rate:g} Hz, {args.seconds:g} s per configuration, '
+          f'{os.cpu_count()} CPUs (shared machine: figures vary with load)')
+    print('cams x people | node latency median / p95 ms | end-to-end median / p95 ms | '
+          'processing median / p95 ms | node CPU % of one core | output sets | tracks')
+    for item in args.configs.split(','):
+        cams, people = (int(v) for v in item.lower().split('x'))
+        r = run(cams, people, args.seconds, args.rate)
+        print(f'{cams:4d} x {people:<2d}     | {r["node_median_ms"]:>6} / {r["node_p95_ms"]:<6}'
+              f'            | {r["e2e_median_ms"]:6.1f} / {r["e2e_p95_ms"]:<6.1f}'
+              f'           | {r["proc_median_ms"]:>6} / {r["proc_p95_ms"]:<6}'
+              f'           | {r["cpu_pct"]:5.1f}                  | '
+              f'{r["received"]}/{r["frames"]} ({r["partial"]} partial) | '
+              f'{r["mean_tracks"]:.1f}', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
