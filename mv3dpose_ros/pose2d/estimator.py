@@ -171,14 +171,25 @@ class YoloPoseEstimator(PoseEstimator):
     """Ultralytics YOLO pose export (``nms=False``): letterbox 114, NMS and inversion here."""
 
     def preprocess(self, image: np.ndarray, order: str = 'bgr') -> Tuple[np.ndarray, Letterbox]:
-        """Letterbox with grey 114, RGB, CHW float32 / 255 (one cv2 call for the last three)."""
+        """
+        Letterbox with grey 114, RGB, CHW float32 / 255.
+
+        Only the resized content is converted (one cv2 call: swap, scale, transpose) and
+        written into a tensor whose padding stays 114 / 255; the tensor is reused between
+        calls (one estimator per thread).
+        """
         box = Letterbox.fit(image.shape[:2], self.input_size)
-        padded = box.apply(image, 114)
-        if padded.ndim == 2:
-            padded = cv2.cvtColor(padded, cv2.COLOR_GRAY2BGR)
+        content = cv2.resize(image, (box.content_w, box.content_h),
+                             interpolation=cv2.INTER_LINEAR)
+        if content.ndim == 2:
+            content = cv2.cvtColor(content, cv2.COLOR_GRAY2BGR)
             order = 'bgr'
-        tensor = cv2.dnn.blobFromImage(padded, 1.0 / 255.0, swapRB=(order == 'bgr'))
-        return tensor, box
+        if getattr(self, '_padded_for', None) != box:
+            self._tensor = np.full((1, 3) + tuple(self.input_size), 114.0 / 255.0, np.float32)
+            self._padded_for = box
+        self._tensor[:, :, box.top:box.top + box.content_h, box.left:box.left + box.content_w] = \
+            cv2.dnn.blobFromImage(content, 1.0 / 255.0, swapRB=(order == 'bgr'))
+        return self._tensor, box
 
     def postprocess(self, outputs: Sequence[np.ndarray], box: Letterbox) -> Detections:
         """Threshold person scores, NMS, map boxes and keypoints to the original image."""
