@@ -85,7 +85,9 @@ def poses_to_line(frame: int, ids: Sequence[int], joints: np.ndarray, layout: st
 
     Confidence is 1 for present joints, 0 for missing ones.
     """
-    joints = np.asarray(joints, dtype=float).reshape(len(ids), -1, 3)
+    joints = np.asarray(joints, dtype=float)
+    if len(ids) != len(joints):
+        raise ValueError(f'{len(ids)} ids for {len(joints)} poses')
     tracks = []
     for i, pose in zip(ids, joints):
         ok = np.isfinite(pose).all(-1)
