@@ -24,6 +24,7 @@ import hashlib
 import json
 import os
 
+import cv2
 from mv3dpose_ros.cli import main as cli_main
 from mv3dpose_ros.pose2d import fetch as fetch_mod
 from mv3dpose_ros.pose2d import models
@@ -278,3 +279,68 @@ def test_fetch_is_idempotent_when_checksum_matches(tmp_path, yolo_case, capsys):
     assert json.loads(capsys.readouterr().out)['family'] == 'yolo-pose'
     assert cli_main(['model', 'path', '--size', '384x640', '--cache-dir', str(cache)]) == 1
     assert 'mv3dpose model fetch' in capsys.readouterr().err
+
+
+def test_keypoints_guessed_outside_the_image_get_zero_confidence(tmp_path):
+    lb = Letterbox.fit((H, W), IN)
+    out = np.zeros((1, 56, 8400), np.float32)
+    kpts = np.tile([[500.0, 500.0]], (17, 1))
+    kpts[0] = [-40.0, 500.0]                             # left of the image
+    kpts[1] = [500.0, 1100.0]                            # below it (inside the padding)
+    out[0, :5, 0] = [320, 320, 100, 100, 0.9]
+    out[0, 5:, 0] = np.concatenate([lb.to_input(kpts), np.full((17, 1), 0.9)], 1).reshape(-1)
+    path = _write(tmp_path, 'edge.onnx', make_constant_model(
+        [('images', np.float32, [1, 3, 640, 640])], {'output0': out}, {'task': 'pose'}))
+    det = open_estimator(path).infer(np.zeros((H, W, 3), np.uint8))
+    assert det.keypoints[0, :2, 2].tolist() == [0.0, 0.0]
+    assert np.all(det.keypoints[0, 2:, 2] == pytest.approx(0.9))
+
+
+def test_image_messages_with_row_padding_and_bad_sizes():
+    from mv3dpose_ros.ros.images import image_to_numpy, ImageError, numpy_to_image
+    img = np.arange(4 * 5 * 3, dtype=np.uint8).reshape(4, 5, 3)
+    msg = numpy_to_image(img, encoding='rgb8')
+    arr, order = image_to_numpy(msg)
+    assert order == 'rgb' and np.array_equal(arr, img)
+    padded = np.zeros((4, 20), np.uint8)                 # step 20 > 5 x 3
+    padded[:, :15] = img.reshape(4, 15)
+    msg.step, msg.data = 20, padded.tobytes()
+    assert np.array_equal(image_to_numpy(msg)[0], img)
+    msg.data = padded.tobytes()[:-1]
+    with pytest.raises(ImageError, match='expected height 4 x step 20'):
+        image_to_numpy(msg)
+    msg.encoding = 'bayer_rggb8'
+    with pytest.raises(ImageError, match='unsupported image encoding'):
+        image_to_numpy(msg)
+    with pytest.raises(ImageError, match='does not fit'):
+        numpy_to_image(img, encoding='mono8')
+
+
+def test_frame_source_reads_folders_and_videos(tmp_path):
+    from mv3dpose_ros.nodes.image_publisher import FrameSource
+    frames = [np.full((48, 64, 3), 40 * i, np.uint8) for i in range(4)]
+    folder = tmp_path / 'imgs'
+    folder.mkdir()
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(folder / f'{i:02d}.png'), f)
+    (folder / 'notes.txt').write_text('not an image')
+    src = FrameSource(str(folder), preload=True)
+    got = [src.read_next() for _ in range(5)]
+    assert got[4] is None and all(np.array_equal(g, f) for g, f in zip(got, frames))
+    src.rewind()
+    assert np.array_equal(src.read_next(), frames[0])
+    video = str(tmp_path / 'clip.avi')
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
+    for f in frames:
+        writer.write(f)
+    writer.release()
+    src = FrameSource(video)
+    count = 0
+    while (frame := src.read_next()) is not None:
+        assert frame.shape == (48, 64, 3) and abs(int(frame.mean()) - 40 * count) <= 3
+        count += 1
+    assert count == 4
+    with pytest.raises(ValueError, match='source not found'):
+        FrameSource(str(tmp_path / 'missing'))
+    with pytest.raises(ValueError, match='no images'):
+        FrameSource(str(tmp_path))
