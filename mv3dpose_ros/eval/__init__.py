@@ -15,6 +15,7 @@
 """
 Evaluation metrics: PCP3D (10-part and 8-limb), MPJPE, CLEAR MOT / IDF1.
 
-Modules: :mod:`.pcp`, :mod:`.mpjpe`, :mod:`.mot`. All distances are metres; missing joints
-are NaN.
+Modules: :mod:`.pcp`, :mod:`.mpjpe`, :mod:`.mot` (per-frame building blocks) and
+:mod:`.sequence` (a whole tracks file against Campus/Shelf, Panoptic or JSON Lines ground
+truth, as ``mv3dpose eval`` prints it). All distances are metres; missing joints are NaN.
 """
