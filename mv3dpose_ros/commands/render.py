@@ -123,12 +123,14 @@ class View:
         centre = 0.5 * (lo + hi)
         self.origin = np.array([self.w / 2, margin_top + (self.h - margin_top - margin) / 2])
         self.centre = centre
+        self.flip = False         # True: the first axis grows to the left
 
     def px(self, X: np.ndarray) -> np.ndarray:
         """Map world points ``[..., 3]`` to panel pixels ``[..., 2]`` (second axis up)."""
         X = np.asarray(X, dtype=float)
         d = np.stack([X[..., self.axes[0]], X[..., self.axes[1]]], axis=-1) - self.centre
-        return self.origin + d * np.array([self.scale, -self.scale])
+        return self.origin + d * np.array([-self.scale if self.flip else self.scale,
+                                           -self.scale])
 
     def blank(self) -> np.ndarray:
         """Return the panel with its metre grid, axis names and title."""
@@ -138,7 +140,8 @@ class View:
         step = 1.0 if max(hi - lo) > 3 else 0.5
         for k, (a, b) in enumerate(zip(lo, hi)):
             for v in np.arange(math.ceil(a / step) * step, b, step):
-                p = self.origin[k] + (v - self.centre[k]) * self.scale * (1 if k == 0 else -1)
+                sign = (-1 if self.flip else 1) if k == 0 else -1
+                p = self.origin[k] + (v - self.centre[k]) * self.scale * sign
                 p = int(round(p))
                 if k == 0:
                     cv2.line(img, (p, 30), (p, self.h), GRID, 1)
@@ -148,8 +151,8 @@ class View:
                     cv2.line(img, (0, p), (self.w, p), GRID, 1)
                     cv2.putText(img, f'{v:g}', (3, p - 3), FONT, 0.35, AXIS_TEXT, 1,
                                 cv2.LINE_AA)
-        cv2.putText(img, f'{self.names[0]} [m]', (self.w - 60, self.h - 20), FONT, 0.45,
-                    AXIS_TEXT, 1, cv2.LINE_AA)
+        cv2.putText(img, f'{self.names[0]} [m]', (8 if self.flip else self.w - 60,
+                    self.h - 20), FONT, 0.45, AXIS_TEXT, 1, cv2.LINE_AA)
         cv2.putText(img, f'{self.names[1]} [m]', (22, 46), FONT, 0.45, AXIS_TEXT, 1,
                     cv2.LINE_AA)
         cv2.rectangle(img, (0, 0), (self.w, 26), (235, 235, 235), -1)
@@ -205,12 +208,18 @@ class Renderer:
             top = [np.minimum(top[0], centres[:, :2].min(0) - 0.4),
                    np.maximum(top[1], centres[:, :2].max(0) + 0.4)]
         top = _min_extent(top, 2.0)
-        side_lo = np.array([lo[0] - 0.4, min(0.0, lo[2]) - 0.1])
-        side_hi = np.array([hi[0] + 0.4, max(2.0, hi[2]) + 0.2])
         self.top = View('top view (looking down)', (0, 1), top[0], top[1], (panel, panel),
                         ('x', 'y'))
-        self.side = View('side view (looking along +y)', (0, 2),
-                         *_min_extent([side_lo, side_hi], 2.0), (panel, panel), ('x', 'z'))
+        z_lo, z_hi = min(0.0, lo[2]) - 0.1, max(1.9, hi[2]) + 0.25
+        half = (panel, panel // 2)
+        self.sides = [
+            View('side view (looking along +y)', (0, 2), np.array([lo[0] - 0.4, z_lo]),
+                 np.array([hi[0] + 0.4, z_hi]), half, ('x', 'z')),
+            View('side view (looking along -x)', (1, 2), np.array([lo[1] - 0.4, z_lo]),
+                 np.array([hi[1] + 0.4, z_hi]), half, ('y', 'z')),
+        ]
+        self.sides[1].flip = True   # looking along -x: +y points left
+        self.t0 = next((f.stamp for f in frames if f.stamp is not None), None)
         self.roots: Dict[int, List[Tuple[int, np.ndarray]]] = {}
         for i, f in enumerate(frames):
             for t in _live(f):
@@ -221,9 +230,11 @@ class Renderer:
     # -------------------------------------------------------------------- 3D views
     def _views(self, index: int) -> np.ndarray:
         frame = self.frames[index]
-        top, side = self.top.blank(), self.side.blank()
-        floor = np.round(self.side.px(np.array([[-1e3, 0, 0], [1e3, 0, 0]]))).astype(int)
-        cv2.line(side, tuple(floor[0]), tuple(floor[1]), (150, 150, 150), 2)  # the ground
+        top = self.top.blank()
+        sides = [v.blank() for v in self.sides]
+        for view, img in zip(self.sides, sides):
+            floor = np.round(view.px(np.array([[-1e3, -1e3, 0], [1e3, 1e3, 0]]))).astype(int)
+            cv2.line(img, tuple(floor[0]), tuple(floor[1]), (150, 150, 150), 2)  # the ground
         for name, cam in self.cameras.items():
             c = cam.center
             axis = cam.R[2]  # optical axis in world coordinates
@@ -240,7 +251,7 @@ class Renderer:
                 uv = np.round(self.top.px(np.array(pts))).astype(np.int32)
                 cv2.polylines(top, [uv.reshape(-1, 1, 2)], False, track_colour(tid), 1,
                               cv2.LINE_AA)
-        for t in sorted(_live(frame), key=lambda t: -np.nanmean(t.joints[:, 1])):
+        for t in _live(frame):
             ok = _joints_valid(t)
             if not ok.any():
                 continue
@@ -248,13 +259,17 @@ class Renderer:
             predicted = (np.asarray(t.joint_state) == JointState.PREDICTED
                          if t.joint_state is not None else None)
             dim = t.state == TrackState.COASTING
-            for view, img in ((self.top, top), (self.side, side)):
-                uv = view.px(t.joints)
-                _draw_skeleton(img, uv, ok, self.layout.bones, colour, 2, 3, predicted, dim)
             head = t.joints[ok][np.argmax(t.joints[ok][:, 2])]
-            _label(side, f'#{t.id}', self.side.px(head) - [0, 12], colour, 0.5, 1)
-            _label(top, f'#{t.id}', self.top.px(t.joints[ok].mean(0)) - [0, 16], colour, 0.5, 1)
-        return np.hstack([top, side])
+            for view, img in [(self.top, top)] + list(zip(self.sides, sides)):
+                _draw_skeleton(img, view.px(t.joints), ok, self.layout.bones, colour, 2, 3,
+                               predicted, dim)
+                at = (view.px(t.joints[ok].mean(0)) - [0, 16] if view is self.top
+                      else view.px(head) - [0, 10])
+                _label(img, f'#{t.id}', at, colour, 0.5, 1)
+        legend = 'hollow joint = predicted, pale skeleton = coasting'
+        cv2.putText(sides[1], legend, (self.sides[1].w - 330, 19), FONT, 0.38, AXIS_TEXT, 1,
+                    cv2.LINE_AA)
+        return np.hstack([top, np.vstack(sides)])
 
     # -------------------------------------------------------------------- camera images
     def _camera_tiles(self, index: int, images: Mapping[str, np.ndarray], width: int,
@@ -305,12 +320,11 @@ class Renderer:
         views = self._views(index)
         live = sorted(_live(frame), key=lambda t: t.id)
         bar = np.full((40, views.shape[1], 3), 255, np.uint8)
-        stamp = '' if frame.stamp is None else f'   t = {frame.stamp:.3f} s'
+        stamp = ('' if frame.stamp is None or self.t0 is None
+                 else f'   t = {frame.stamp - self.t0:.2f} s')
         text = f'{title}   ' if title else ''
         cv2.putText(bar, f'{text}frame {frame.frame}{stamp}   {len(live)} tracked',
                     (10, 26), FONT, 0.6, (30, 30, 30), 1, cv2.LINE_AA)
-        cv2.putText(bar, 'hollow joint = predicted, pale = coasting', (views.shape[1] // 2 - 60,
-                    26), FONT, 0.42, AXIS_TEXT, 1, cv2.LINE_AA)
         x = views.shape[1] - 10
         for t in reversed(live):
             label = f'#{t.id}'
