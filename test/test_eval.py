@@ -190,3 +190,14 @@ def test_mot_root_distance_and_threshold():
         MOTEvaluator(distance='iou')
     with pytest.raises(ValueError):
         evaluate_mot([([1, 1], np.stack([g[0], g[0]]), [], np.zeros((0, 2, 3)))])
+
+
+def test_pcp_skips_parts_without_ground_truth():
+    gt = shelf_pose()
+    gt[13] = np.nan                        # top of head not annotated: head part not counted
+    pred = shelf_pose()
+    pred[6, 0] += 1.0                      # right lower arm wrong
+    res = evaluate_pcp([(pred[None], {0: gt})])
+    assert res.per_actor[0] == pytest.approx(8 / 9)
+    assert np.isnan(res.per_group['Head'][0])
+    assert res.per_group['Lower arms'][0] == pytest.approx(0.5)

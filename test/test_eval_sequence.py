@@ -121,6 +121,7 @@ def test_panoptic_ground_truth_through_coco17_tracks(shared_data, tmp_path, caps
     assert fig['mpjpe_m'] == pytest.approx(0.0, abs=1e-5)
     assert fig['mot']['mota'] == 1.0 and fig['mot']['num_unique_objects'] == 3
     assert fig['mot']['id_switches'] == 0
+    assert fig['pcp']['average'] == 1.0          # head joints derived alike on both sides
     # the frame offset shifts which tracks line scores which GT frame
     assert cli.main(['eval', '--tracks', path, '--gt', folder, '--format', 'panoptic',
                      '--frame-offset', '1', '--json', js]) == 0

@@ -30,8 +30,9 @@ Faster-VoxelPose for Campus and Shelf, checked against their ``evaluate`` code:
   MPJPE (not exclusive, as in VoxelPose); PCP is computed per actor and averaged over actors.
 
 Differences, on purpose: a ground-truth person in a frame without any prediction counts all
-its parts as wrong (Faster-VoxelPose skips such frames, which inflates PCP), and a prediction
-part with a missing (NaN) endpoint is wrong.
+its parts as wrong (Faster-VoxelPose skips such frames, which inflates PCP), a prediction
+part with a missing (NaN) endpoint is wrong, and a part whose ground-truth endpoints are not
+annotated is not counted at all (never the case on Campus/Shelf).
 """
 
 from dataclasses import dataclass
@@ -91,6 +92,13 @@ def pcp_correct(pred: np.ndarray, gt: np.ndarray, alpha: float = 0.5,
         return np.isfinite(mean_err) & (mean_err <= alpha * length)
 
 
+def _gt_parts_valid(gt: np.ndarray, variant: str) -> np.ndarray:
+    """Return ``[..., parts]``: are both ground-truth endpoints of each part known."""
+    idx = PCP_VARIANTS[variant]
+    g = np.isfinite(_with_hip_mid(gt)).all(-1)
+    return np.stack([g[..., PCP_PARTS[i][2]] & g[..., PCP_PARTS[i][3]] for i in idx], -1)
+
+
 @dataclass
 class PCPResult:
     """PCP per actor and part group, plus the detection recall at ``recall_threshold_m``."""
@@ -137,7 +145,7 @@ def evaluate_pcp(frames: Iterable[Tuple[np.ndarray, Mapping[int, np.ndarray]]],
         raise ValueError(f"matching must be 'nearest' or 'hungarian', not {matching!r}")
     groups = [PCP_PARTS[i][1] for i in PCP_VARIANTS[variant]]
     correct: Dict[int, np.ndarray] = {}
-    total: Dict[int, int] = {}
+    total: Dict[int, np.ndarray] = {}
     hit = seen = n_frames = 0
     for pred, gt in frames:
         n_frames += 1
@@ -157,20 +165,27 @@ def evaluate_pcp(frames: Iterable[Tuple[np.ndarray, Mapping[int, np.ndarray]]],
             best = np.array([dist[c, k] if c >= 0 else np.inf for k, c in enumerate(choice)])
             hit += int(np.sum(best < recall_threshold_m))
         seen += len(ids)
+        valid = _gt_parts_valid(g, variant)                            # [G, parts]
         for k, aid in enumerate(ids):
-            total[aid] = total.get(aid, 0) + 1
             ok = (pcp_correct(p[choice[k]], g[k], alpha, variant) if choice[k] >= 0
                   else np.zeros(len(groups), dtype=bool))
-            correct[aid] = correct.get(aid, 0) + ok.astype(int)
+            correct[aid] = correct.get(aid, 0) + (ok & valid[k]).astype(int)
+            total[aid] = total.get(aid, 0) + valid[k].astype(int)
     actors = sorted(set(actor_ids) | set(total))
-    per_part = np.array([correct[a] / total[a] if total.get(a) else np.full(len(groups), np.nan)
-                         for a in actors]).reshape(len(actors), len(groups))
+    zero = np.zeros(len(groups), dtype=int)
+    c = np.array([correct.get(a, zero) for a in actors]).reshape(len(actors), len(groups))
+    n = np.array([total.get(a, zero) for a in actors]).reshape(len(actors), len(groups))
+
+    def ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.where(den > 0, num / np.maximum(den, 1), np.nan)
+
     per_group = {}
     for name in PART_GROUPS:
         cols = [i for i, gname in enumerate(groups) if gname == name]
         if cols:
-            per_group[name] = per_part[:, cols].mean(axis=1)
-    return PCPResult(actor_ids=list(actors), per_actor=per_part.mean(axis=1),
+            per_group[name] = ratio(c[:, cols].sum(1), n[:, cols].sum(1))
+    return PCPResult(actor_ids=list(actors), per_actor=ratio(c.sum(1), n.sum(1)),
                      per_group=per_group, recall=hit / seen if seen else float('nan'),
                      frames=n_frames, variant=variant,
                      recall_threshold_label=f'{recall_threshold_m:g}m')

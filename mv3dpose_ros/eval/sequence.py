@@ -221,7 +221,6 @@ def evaluate_run(hyp_layout: str, hyps: PoseFrames, gt: GroundTruth,
     root = glay.root_joints if mot_distance == 'root' else None
     mot = MOTEvaluator(threshold_m, mot_distance, root)
     mp_pairs, pcp_frames = [], []
-    pcp_ok = True
     empty = np.zeros((0, hlay.num_joints, 3))
     for f in frames:
         gid, gpose = gt.frames[f]
@@ -229,23 +228,18 @@ def evaluate_run(hyp_layout: str, hyps: PoseFrames, gt: GroundTruth,
         h_in_g = _to(hpose, hlay.name, glay.name, derive=False)
         mot.update(gid, gpose, hid, h_in_g)
         mp_pairs.append((h_in_g, gpose))
-        if pcp_ok:
-            g14 = _to(gpose, glay.name, 'shelf14')
-            if len(g14) and not np.isfinite(g14).all():
-                pcp_ok = False
-                notes.append(f'PCP skipped: ground truth in {glay.name!r} lacks shelf14 joints')
-                continue
-            pcp_frames.append((_to(hpose, hlay.name, 'shelf14'),
-                               {int(i): p for i, p in zip(gid, g14)}))
+        pcp_frames.append((_to(hpose, hlay.name, 'shelf14'),
+                           {int(i): p for i, p in zip(gid, _to(gpose, glay.name, 'shelf14'))}))
     missing = [f for f in frames if f + frame_offset not in hyps]
     if missing:
         notes.append(f'{len(missing)} of {len(frames)} evaluated frames have no line in the '
                      f'tracks file (counted as no predictions)')
     actor_ids = sorted({int(i) for f in frames for i in gt.frames[f][0]})
-    pcp = pcp8 = None
-    if pcp_ok:
-        pcp = evaluate_pcp(pcp_frames, alpha, '10', pcp_matching, threshold_m, actor_ids)
-        pcp8 = evaluate_pcp(pcp_frames, alpha, '8', pcp_matching, threshold_m, actor_ids)
+    pcp = evaluate_pcp(pcp_frames, alpha, '10', pcp_matching, threshold_m, actor_ids)
+    pcp8 = evaluate_pcp(pcp_frames, alpha, '8', pcp_matching, threshold_m, actor_ids)
+    if glay.name != 'shelf14':
+        notes.append(f'PCP: ground truth converted from {glay.name} to shelf14 (head joints '
+                     f'derived as in core.skeleton)')
     return EvalReport(frames=len(frames), pcp=pcp, pcp8=pcp8,
                       mpjpe=mpjpe(mp_pairs, True, threshold_m, glay.num_joints),
                       mot=mot.result(), notes=notes)
