@@ -76,7 +76,7 @@ def test_track_output_equals_fusion_step(pose2sim):
     folders, missing = match_camera_folders(os.path.join(root, 'pose'), list(cameras))
     assert not missing
     seq = OpenPoseSequence(folders, num_joints=25)
-    fusion = Fusion(cameras, 'body25b', FusionConfig())
+    fusion = Fusion(cameras, 'body25b', FusionConfig(smoothing='causal'))   # the CLI default
     expected, reproj = [], []
     for frame, views in seq:
         tracks = fusion.step(views, frame / FPS)
