@@ -31,7 +31,7 @@ number of valid matches, then minimises their total cost); any number of cameras
 views and poses with missing joints (even all of them) are handled.
 """
 
-from typing import Optional, Sequence, Tuple
+from typing import Sequence, Tuple
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -40,127 +40,158 @@ from scipy.optimize import linear_sum_assignment
 _INFEASIBLE = 1e6
 
 
-def symmetric_epipolar_distance(
-        x_new: np.ndarray, vis_new: np.ndarray,
-        x_ref: np.ndarray, vis_ref: np.ndarray,
-        essentials: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+def epipolar_norm_coefficients(essentials: np.ndarray) -> np.ndarray:
     """
-    Sum and count the symmetric point-to-epipolar-line distances of every pose pair.
+    Return ``[..., 6]`` coefficients for the norms of epipolar lines ``E^T x`` (first two).
 
-    ``x_new`` [P, J, 3] homogeneous normalised points of one camera, ``x_ref`` [M, J, 3] points
-    of reference poses in other cameras, ``essentials`` [M, 3, 3] with
-    ``x_new^T E[m] x_ref[m] = 0``. The per-joint distance is the mean of the distance of the
-    new point to the epipolar line of the reference point and vice versa. Returns
-    ``(sum [P, M], count [P, M])`` over the joints visible in both poses.
+    For homogeneous ``x = (u, v, 1)``, ``|(x^T E)[:2]|^2 = q(x) . coef`` with the monomials
+    ``q(x) = (u^2, v^2, 1, 2 u v, 2 u, 2 v)`` (see ``quadratic_monomials``), which turns the
+    line norms of all pose pairs into one matrix product.
     """
-    lines_new = np.einsum('mab,mjb->mja', essentials, x_ref)               # in the new camera
-    algebraic = np.abs(np.einsum('pja,mja->pmj', x_new, lines_new))
-    lines_ref = np.einsum('pja,mab->pmjb', x_new, essentials[:, :, :2])   # in the ref camera
-    norm_new = np.hypot(lines_new[..., 0], lines_new[..., 1])              # [M, J]
-    norm_ref = np.hypot(lines_ref[..., 0], lines_ref[..., 1])              # [P, M, J]
-    both = vis_new[:, None, :] & vis_ref[None, :, :]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        dist = 0.5 * algebraic * (1.0 / norm_new[None] + 1.0 / norm_ref)
-    both &= np.isfinite(dist)
-    dist = np.where(both, dist, 0.0)
-    return dist.sum(axis=2), both.sum(axis=2)
+    e = essentials[..., :, :2]
+    g = e @ np.swapaxes(e, -1, -2)                                   # [..., 3, 3]
+    return np.stack([g[..., 0, 0], g[..., 1, 1], g[..., 2, 2], g[..., 0, 1], g[..., 0, 2],
+                     g[..., 1, 2]], axis=-1)
 
 
-def _gated_assignment(cost: np.ndarray, threshold: float) -> Tuple[np.ndarray, np.ndarray]:
-    """Solve the assignment after removing pairs at or over ``threshold`` (re-solving vetoes)."""
-    feasible = cost < threshold
-    if not feasible.any():
-        return np.empty(0, dtype=int), np.empty(0, dtype=int)
-    rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
-    keep = feasible[rows, cols]
-    return rows[keep], cols[keep]
+def quadratic_monomials(x: np.ndarray) -> np.ndarray:
+    """Return ``(u^2, v^2, 1, 2uv, 2u, 2v)`` of homogeneous points ``[..., 3]`` (z = 1)."""
+    u, v = x[..., 0], x[..., 1]
+    return np.stack([u * u, v * v, np.ones_like(u), 2 * u * v, 2 * u, 2 * v], axis=-1)
+
+
+def symmetric_epipolar_distance(x_new: np.ndarray, x_ref: np.ndarray, essentials: np.ndarray,
+                                q_new: np.ndarray = None, coef: np.ndarray = None
+                                ) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Sum and count the symmetric point-to-epipolar-line distances of pose pairs.
+
+    ``x_new [P, J, 3]`` and ``x_ref [M, J, 3]`` are homogeneous normalised points (z = 1),
+    NaN for missing joints; ``essentials [M, 3, 3]`` map each reference pose's camera to the
+    new camera (``x_new^T E x_ref = 0``). The per-joint distance is the mean of the distance
+    of the new point to the epipolar line of the reference point and vice versa. Optional
+    precomputed ``q_new = quadratic_monomials(x_new)`` and
+    ``coef = epipolar_norm_coefficients(essentials)`` save work. Returns
+    ``(sum [P, M], count [P, M])`` over the joints present in both poses.
+    """
+    if q_new is None:
+        q_new = quadratic_monomials(x_new)
+    if coef is None:
+        coef = epipolar_norm_coefficients(essentials)
+    lines = x_ref @ np.swapaxes(essentials, -1, -2)                # [M, J, 3] in the new camera
+    xt = x_new.transpose(1, 0, 2)                                    # [J, P, 3]
+    algebraic = np.abs(xt @ lines.transpose(1, 2, 0))                # [J, P, M]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        inv_new = 1.0 / np.hypot(lines[..., 0], lines[..., 1]).T     # [J, M]
+        inv_ref = 1.0 / np.sqrt(q_new.transpose(1, 0, 2) @ coef.T)   # [J, P, M]
+        dist = algebraic * (inv_new[:, None, :] + inv_ref)
+    ok = np.isfinite(dist)
+    return 0.5 * np.where(ok, dist, 0.0).sum(axis=0), ok.sum(axis=0)
 
 
 def associate(points: Sequence[np.ndarray], visible: Sequence[np.ndarray],
               essentials: np.ndarray, threshold: float = 0.02, min_joints: int = 3,
-              max_reference_views: int = 4, min_views: int = 2,
-              order: Optional[Sequence[int]] = None) -> np.ndarray:
+              max_reference_views: int = 4, min_views: int = 2) -> np.ndarray:
     """
     Group the 2D poses of all cameras into person candidates (paper, Algorithm 1).
 
     ``points[c]`` is ``[P_c, J, 2]`` (or homogeneous ``[P_c, J, 3]``) normalised coordinates of
-    camera ``c``, ``visible[c]`` the ``[P_c, J]`` joint mask. Candidates are seeded with the
-    poses of the first camera (in ``order``) that has any; each further camera is matched to
-    the candidates by a gated Hungarian solve on the mean symmetric epipolar distance over all
-    joints visible in both the pose and a member view (``threshold`` in normalised units,
-    at least ``min_joints`` shared joints per member view, at most ``max_reference_views``
-    member views per candidate, those with the most visible joints, which keeps the cost linear
-    in the number of cameras). Unmatched poses start new candidates. Returns ``[K, C]`` pose
-    indices (-1 = not seen by that camera) of the candidates seen by at least ``min_views``
-    cameras.
+    camera ``c``, ``visible[c]`` the ``[P_c, J]`` joint mask. See ``associate_stacked``; this
+    returns ``[K, C]`` pose indices local to each camera (-1 = not seen by that camera).
     """
     num_cams = len(points)
     if len(visible) != num_cams or essentials.shape[:2] != (num_cams, num_cams):
         raise ValueError(f'associate: {num_cams} point sets, {len(visible)} masks and '
                          f'essentials of shape {essentials.shape} disagree')
-    order = range(num_cams) if order is None else order
     counts = np.array([len(p) for p in points], dtype=int)
     offsets = np.concatenate(([0], np.cumsum(counts)))
-    if offsets[-1] == 0:
-        return np.empty((0, num_cams), dtype=int)
-    homog = []
-    for p in points:
-        p = np.asarray(p, dtype=float)
+    num_j = next((np.shape(p)[1] for p in points if len(p)), 0)
+    xs = []
+    for p, v in zip(points, visible):
+        p = np.asarray(p, dtype=float).reshape(len(p), num_j, -1)
         if p.shape[-1] == 2:
             p = np.concatenate((p, np.ones(p.shape[:-1] + (1,))), axis=-1)
-        homog.append(p)
-    x_all = np.concatenate(homog, axis=0)                        # [N, J, 3]
-    vis_all = np.concatenate([np.asarray(v, dtype=bool) for v in visible], axis=0)
-    vis_all &= np.isfinite(x_all).all(axis=-1)
-    joints_all = vis_all.sum(axis=1)                             # [N]
+        xs.append(np.where(np.asarray(v, dtype=bool).reshape(len(p), num_j)[..., None], p,
+                           np.nan))
+    x = np.concatenate(xs, axis=0) if xs else np.zeros((0, num_j, 3))
+    members = associate_stacked(x, offsets, essentials, threshold, min_joints,
+                                max_reference_views, min_views)
+    return np.where(members >= 0, members - offsets[:-1][None, :], -1)
 
-    members = np.empty((0, num_cams), dtype=int)                 # global pose index, -1 = none
-    for cam in order:
-        n = counts[cam]
-        if n == 0:
+
+def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray,
+                      threshold: float = 0.02, min_joints: int = 3,
+                      max_reference_views: int = 4, min_views: int = 2,
+                      norm_coefficients: np.ndarray = None) -> np.ndarray:
+    """
+    Group stacked 2D poses into person candidates (paper, Algorithm 1).
+
+    ``x [N, J, 3]`` holds the homogeneous normalised points of all cameras, camera ``c`` in
+    rows ``offsets[c]:offsets[c + 1]``, NaN for missing joints. Candidates are seeded with the
+    poses of the first camera that has any; each further camera is matched to the candidates
+    by a Hungarian solve on the mean symmetric epipolar distance over all joints the pose
+    shares with the candidate's reference views (``threshold`` in normalised units; a
+    reference view counts when it shares at least ``min_joints`` joints; the first
+    ``max_reference_views`` views of a candidate are its references, which keeps the cost
+    linear in the number of cameras). Pairs at or over the threshold are removed before the
+    solve, so they never block a valid alternative. Unmatched poses start new candidates.
+    Returns ``[K, C]`` global pose indices (-1 = not seen) of the candidates seen by at least
+    ``min_views`` cameras. ``norm_coefficients`` is
+    ``epipolar_norm_coefficients(essentials)`` if precomputed.
+    """
+    num_n = len(x)
+    num_c = len(offsets) - 1
+    if num_n == 0:
+        return np.zeros((0, num_c), dtype=int)
+    cam_of = np.repeat(np.arange(num_c), np.diff(offsets))
+    if norm_coefficients is None:
+        norm_coefficients = epipolar_norm_coefficients(essentials)
+    q_all = quadratic_monomials(x)
+    members = np.full((num_n, num_c), -1, dtype=int)
+    ref_pose: list = []
+    ref_cand: list = []
+    nref: list = []
+    num_k = 0
+    for cam in range(num_c):
+        lo, hi = int(offsets[cam]), int(offsets[cam + 1])
+        if hi == lo:
             continue
-        gidx = np.arange(offsets[cam], offsets[cam + 1])
-        matched = np.zeros(n, dtype=bool)
-        if len(members):
-            rows, cols = _match_camera(cam, gidx, members, x_all, vis_all, joints_all,
-                                       essentials, threshold, min_joints, max_reference_views)
-            members[cols, cam] = gidx[rows]
+        matched = np.zeros(hi - lo, dtype=bool)
+        if num_k:
+            rp = np.array(ref_pose)
+            rc = cam_of[rp]
+            dsum, dcnt = symmetric_epipolar_distance(x[lo:hi], x[rp], essentials[rc, cam],
+                                                     q_all[lo:hi], norm_coefficients[rc, cam])
+            usable = dcnt >= min_joints
+            onehot = np.eye(num_k)[ref_cand]                 # [M, K] reference -> candidate
+            total = np.where(usable, dsum, 0.0) @ onehot
+            count = (usable * dcnt) @ onehot
+            with np.errstate(invalid='ignore', divide='ignore'):
+                cost = total / count                         # NaN where no usable view
+            rows, cols = _gated_assignment(cost, threshold)
+            members[cols, cam] = lo + rows
             matched[rows] = True
-        new = gidx[~matched]
-        if len(new):
-            seeds = np.full((len(new), num_cams), -1, dtype=int)
-            seeds[:, cam] = new
-            members = np.concatenate((members, seeds), axis=0)
-    keep = (members >= 0).sum(axis=1) >= min_views
-    members = members[keep]
-    local = members - offsets[:-1][None, :]
-    return np.where(members >= 0, local, -1)
+            for r, k in zip(rows.tolist(), cols.tolist()):
+                if nref[k] < max_reference_views:
+                    ref_pose.append(lo + r)
+                    ref_cand.append(k)
+                    nref[k] += 1
+        for r in np.nonzero(~matched)[0].tolist():
+            members[num_k, cam] = lo + r
+            ref_pose.append(lo + r)
+            ref_cand.append(num_k)
+            nref.append(1)
+            num_k += 1
+    members = members[:num_k]
+    return members[(members >= 0).sum(axis=1) >= min_views]
 
 
-def _match_camera(cam: int, gidx: np.ndarray, members: np.ndarray, x_all: np.ndarray,
-                  vis_all: np.ndarray, joints_all: np.ndarray, essentials: np.ndarray,
-                  threshold: float, min_joints: int,
-                  max_reference_views: int) -> Tuple[np.ndarray, np.ndarray]:
-    """Match the poses ``gidx`` of camera ``cam`` to the candidates; return (pose rows, cands)."""
-    num_cands, num_cams = members.shape
-    score = np.where(members >= 0, joints_all[np.maximum(members, 0)], -1)
-    if num_cams > max_reference_views:
-        best = np.argsort(-score, axis=1, kind='stable')[:, :max_reference_views]
-        ref_cand = np.repeat(np.arange(num_cands), max_reference_views)
-        ref_cam = best.ravel()
-    else:
-        ref_cand, ref_cam = np.indices((num_cands, num_cams)).reshape(2, -1)
-    ref_pose = members[ref_cand, ref_cam]
-    ok = ref_pose >= 0
-    ref_cand, ref_cam, ref_pose = ref_cand[ok], ref_cam[ok], ref_pose[ok]
-    dsum, dcnt = symmetric_epipolar_distance(
-        x_all[gidx], vis_all[gidx], x_all[ref_pose], vis_all[ref_pose],
-        essentials[ref_cam, cam])
-    usable = dcnt >= min_joints
-    onehot = np.zeros((len(ref_cand), num_cands))
-    onehot[np.arange(len(ref_cand)), ref_cand] = 1.0
-    total = np.where(usable, dsum, 0.0) @ onehot
-    count = np.where(usable, dcnt, 0) @ onehot
-    with np.errstate(divide='ignore', invalid='ignore'):
-        cost = np.where(count > 0, total / np.maximum(count, 1), np.inf)
-    return _gated_assignment(cost, threshold)
+def _gated_assignment(cost: np.ndarray, threshold: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Solve the assignment after removing pairs at or over ``threshold`` (re-solving vetoes)."""
+    with np.errstate(invalid='ignore'):
+        feasible = cost < threshold                          # NaN -> infeasible
+    if not feasible.any():
+        return np.empty(0, dtype=int), np.empty(0, dtype=int)
+    rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
+    keep = feasible[rows, cols]
+    return rows[keep], cols[keep]

@@ -28,16 +28,16 @@ Units: thresholds on image distances are in normalised image units (pixels / foc
 
 from dataclasses import asdict, dataclass
 import logging
-from typing import Dict, List, Mapping, Optional, Set
+from typing import Dict, List, Mapping, Optional, Set, Tuple
 
-from mv3dpose_ros.core.association import associate
+from mv3dpose_ros.core.association import associate_stacked, epipolar_norm_coefficients
 from mv3dpose_ros.core.camera import Camera, essential_matrix
 from mv3dpose_ros.core.skeleton import get_layout, Layout
 from mv3dpose_ros.core.smoothing import CausalFilter
-from mv3dpose_ros.core.tracking import (centroid, pose_distance, Tracker, TrackerConfig,
-                                        TrackRecord)
-from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, swap_pairs,
-                                             swapped_views, triangulate_robust, Triangulation)
+from mv3dpose_ros.core.tracking import centroid, pose_distance, Tracker, TrackerConfig, Tracks
+from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, dlt_basis,
+                                             swap_pairs, swapped_views, triangulate_robust,
+                                             Triangulation)
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 import numpy as np
 
@@ -113,17 +113,6 @@ class FusionConfig:
                              f'got {self.smoothing!r}')
 
 
-class _Extra:
-    """Per-track output state kept by ``Fusion`` in ``TrackRecord.extra``."""
-
-    __slots__ = ('filter', 'confidence', 'cameras')
-
-    def __init__(self, num_joints: int, filt: Optional[CausalFilter]) -> None:
-        self.filter = filt
-        self.confidence = np.zeros(num_joints)
-        self.cameras: tuple = ()
-
-
 class Fusion:
     """Fuse synchronised 2D poses of a calibrated rig into tracked 3D skeletons."""
 
@@ -148,8 +137,14 @@ class Fusion:
             for b in range(num_c):
                 if a != b:
                     self._essentials[a, b] = essential_matrix(self.cameras[a], self.cameras[b])
+        self._norm_coef = epipolar_norm_coefficients(self._essentials)
         self._projections = np.stack([np.hstack([c.R, c.t[:, None]]) for c in self.cameras])
+        self._basis = dlt_basis(self._projections)
         self._focal = np.array([c.focal for c in self.cameras])
+        # Pixel -> normalised for distortion-free cameras: x = (u - cx - s y) / fx, y = ...
+        self._k = np.array([[c.K[0, 0], c.K[0, 1], c.K[0, 2], c.K[1, 1], c.K[1, 2]]
+                            for c in self.cameras])
+        self._distorted = [c.has_distortion for c in self.cameras]
         self._bounds = np.array([_normalised_bounds(c) for c in self.cameras])   # [C, 4]
         self._birth_views = max(2, min(self.config.min_birth_cameras_in_view, num_c - 1))
         lay = self.layout
@@ -157,26 +152,38 @@ class Fusion:
         self._bone_lo, self._bone_hi = bone_length_limits(lay.joint_names, lay.bones)
         self._flip_pairs = np.array(lay.flip_pairs, dtype=int).reshape(-1, 2)
         try:
-            self._root = np.array(lay.root_joints, dtype=int)
+            self._root: Optional[np.ndarray] = np.array(lay.root_joints, dtype=int)
         except ValueError:
             self._root = None
         cfg = self.config
-        self.tracker = Tracker(TrackerConfig(
+        self.tracker = Tracker(lay.num_joints, TrackerConfig(
             gate_m=cfg.tracking_gate_m, gate_growth_mps=cfg.tracking_gate_growth_mps,
             min_shared_joints=cfg.min_shared_joints, predict=cfg.tracking_prediction,
             confirm_hits=cfg.confirm_hits, max_coast_s=cfg.max_coast_s,
-            min_birth_joints=cfg.min_birth_joints), root_joints=self._root)
+            min_birth_joints=cfg.min_birth_joints))
+        self._new_filter()
         self._last_stamp: Optional[float] = None
         self._warned: Set[str] = set()
+        num_j = lay.num_joints
+        self._confidence = np.zeros((0, num_j))           # last observed confidence per track
         #: 3D poses ``[K, J, 3]`` triangulated in the last step, before tracking.
-        self.last_poses = np.empty((0, lay.num_joints, 3))
+        self.last_poses = np.empty((0, num_j, 3))
         #: Figures of the last step (counts, median reprojection error in px).
         self.last_info: Dict[str, float] = {}
+
+    def _new_filter(self) -> None:
+        cfg = self.config
+        self._filter = None
+        if cfg.smoothing == 'causal':
+            self._filter = CausalFilter(self.layout.num_joints, cfg.smoothing_alpha,
+                                        cfg.smoothing_beta, cfg.max_gap_s, cfg.smoothing_reset_m)
 
     # ------------------------------------------------------------------ public API
     def reset(self) -> List[Track]:
         """Clear all tracks and filters; return their DELETED tombstones (ids keep counting)."""
-        dropped = [self._tombstone(t) for t in self.tracker.reset()]
+        dropped = self._tombstones(self.tracker.reset())
+        self._new_filter()
+        self._confidence = np.zeros((0, self.layout.num_joints))
         self._last_stamp = None
         return dropped
 
@@ -186,30 +193,30 @@ class Fusion:
 
         ``views`` maps camera name -> ``[P, J, 3]`` raw-pixel 2D poses (x, y, confidence;
         confidence 0 = missing joint) in the layout's joint order; cameras may be absent and
-        P may be 0. Returns the live tracks (TENTATIVE, CONFIRMED, COASTING) sorted by id, then
+        P may be 0. Returns the live tracks (TENTATIVE, CONFIRMED, COASTING) in id order, then
         the tracks deleted in this step, once, as DELETED tombstones. Bad views (unknown
-        camera, wrong shape) are skipped with a logged warning naming them.
+        camera, wrong shape) are skipped with a logged warning naming them. A stamp earlier
+        than the previous one resets the tracks first (their tombstones come with this step).
         """
         stamp = float(stamp)
-        out_tomb: List[Track] = []
+        tombs: List[Track] = []
         if self._last_stamp is not None and stamp < self._last_stamp:
             self._warn('time', f'stamp went back from {self._last_stamp:.6f} s to {stamp:.6f} s:'
-                       ' tracks reset')
-            out_tomb = self.reset()
+                       ' tracks reset (warned once)')
+            tombs = self.reset()
         self._last_stamp = stamp
         tri, members = self._reconstruct(views)
         self.last_poses = tri.joints
-        live, deleted = self.tracker.update(tri.joints, stamp,
-                                            self.cameras_in_view(tri.joints) >= self._birth_views)
-        out = [self._output(t, tri, members, stamp) for t in live]
-        out.sort(key=lambda t: t.track_id)
-        return out + out_tomb + [self._tombstone(t) for t in deleted]
+        upd = self.tracker.update(tri.joints, stamp,
+                                  self.cameras_in_view(tri.joints) >= self._birth_views)
+        return self._outputs(upd.detection, upd.previous, tri, members, stamp) + tombs \
+            + self._tombstones(upd.deleted)
 
     def cameras_in_view(self, poses: np.ndarray) -> np.ndarray:
         """Count, per pose ``[K, J, 3]``, the cameras whose image contains its joint centroid."""
         centre = centroid(poses)                                            # [K, 3]
-        cam = np.einsum('cab,kb->kca', self._projections[:, :, :3], centre) \
-            + self._projections[None, :, :, 3]
+        cam = centre[:, None, None, :] @ self._projections[:, :, :3].transpose(0, 2, 1)
+        cam = cam[:, :, 0] + self._projections[:, :, 3]                    # [K, C, 3]
         with np.errstate(invalid='ignore', divide='ignore'):
             x, y = cam[..., 0] / cam[..., 2], cam[..., 1] / cam[..., 2]
             b = self._bounds
@@ -223,96 +230,114 @@ class Fusion:
             self._warned.add(key)
             _LOG.warning('Fusion: %s', message)
 
-    def _prepare(self, views: Mapping[str, np.ndarray]):
-        """Validate views, undistort all keypoints once; return per-camera arrays."""
+    def _prepare(self, views: Mapping[str, np.ndarray]
+                 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Validate the views and normalise all keypoints at once.
+
+        Returns ``x [N, J, 3]`` homogeneous normalised points (NaN = missing) of the usable
+        poses of all cameras in rig order, their confidences ``[N, J]`` and ``offsets [C+1]``.
+        """
         cfg = self.config
         num_j = self.layout.num_joints
-        pts, vis, conf = [], [], []
-        empty2, empty1 = np.empty((0, num_j, 2)), np.empty((0, num_j))
+        arrays, counts = [], []
         for name in views:
             if name not in self._index:
                 self._warn('cam:' + str(name), f'view of unknown camera {name!r} ignored '
                            f'(rig cameras: {", ".join(self.camera_names)})')
-        for name, cam in zip(self.camera_names, self.cameras):
+        for name in self.camera_names:
             arr = views.get(name)
-            if arr is None:
-                pts.append(empty2)
-                vis.append(empty1.astype(bool))
-                conf.append(empty1)
-                continue
-            arr = np.asarray(arr, dtype=float)
-            if arr.size == 0:
-                arr = arr.reshape(0, num_j, 3)
-            if arr.ndim != 3 or arr.shape[1:] != (num_j, 3):
-                self._warn(f'shape:{name}:{arr.shape}',
-                           f'view of camera {name!r} has shape {arr.shape}, expected '
-                           f'[P, {num_j}, 3] for layout {self.layout.name!r}: ignored')
-                arr = arr[:0].reshape(0, num_j, 3) if arr.ndim else np.empty((0, num_j, 3))
-            c = arr[..., 2]
-            with np.errstate(invalid='ignore'):
-                v = (c >= cfg.min_joint_confidence) & np.isfinite(arr).all(axis=-1)
-            keep = v.sum(axis=1) >= cfg.min_pose_joints
-            if not keep.all():
-                arr, v, c = arr[keep], v[keep], c[keep]
-            xy = np.where(v[..., None], arr[..., :2], np.nan)
-            pts.append(cam.undistort(xy) if len(xy) else empty2)
-            vis.append(v)
-            conf.append(np.where(v, np.clip(c, 0.0, 1.0), 0.0))
-        return pts, vis, conf
+            n = 0
+            if arr is not None:
+                arr = np.asarray(arr, dtype=float)
+                if arr.ndim == 3 and arr.shape[1:] == (num_j, 3):
+                    n = len(arr)
+                elif arr.size:
+                    self._warn(f'shape:{name}:{arr.shape}',
+                               f'view of camera {name!r} has shape {arr.shape}, expected '
+                               f'[P, {num_j}, 3] for layout {self.layout.name!r}: ignored')
+            if n:
+                arrays.append(arr)
+            counts.append(n)
+        counts = np.array(counts)
+        if not arrays:
+            return np.zeros((0, num_j, 3)), np.zeros((0, num_j)), np.zeros(len(counts) + 1, int)
+        a = np.concatenate(arrays, axis=0) if len(arrays) > 1 else arrays[0]
+        with np.errstate(invalid='ignore'):
+            vis = (a[..., 2] >= cfg.min_joint_confidence) & np.isfinite(a).all(axis=-1)
+        keep = vis.sum(axis=1) >= cfg.min_pose_joints
+        cam_of = np.repeat(np.arange(len(counts)), counts)
+        if not keep.all():
+            a, vis, cam_of = a[keep], vis[keep], cam_of[keep]
+            counts = np.bincount(cam_of, minlength=len(counts))
+        offsets = np.concatenate(([0], np.cumsum(counts)))
+        k = self._k[cam_of][:, None, :]                                     # [N, 1, 5]
+        y = (a[..., 1] - k[..., 4]) / k[..., 3]
+        x = np.stack([(a[..., 0] - k[..., 2] - k[..., 1] * y) / k[..., 0], y,
+                      np.ones_like(y)], axis=-1)
+        for c in np.nonzero(counts)[0]:
+            if self._distorted[c]:
+                lo, hi = offsets[c], offsets[c + 1]
+                x[lo:hi, :, :2] = self.cameras[c].undistort(a[lo:hi, :, :2])
+        x[~vis] = np.nan
+        conf = np.where(vis, np.clip(a[..., 2], 0.0, 1.0), 0.0)
+        return x, conf, offsets
 
     def _reconstruct(self, views: Mapping[str, np.ndarray]):
         """Associate, triangulate and clean up; return (Triangulation, members [K, C])."""
         cfg = self.config
-        pts, vis, conf = self._prepare(views)
+        x, conf, offsets = self._prepare(views)
         num_j = self.layout.num_joints
-        counts = np.array([len(p) for p in pts])
-        offsets = np.concatenate(([0], np.cumsum(counts)))
-        info = {'poses_2d': int(offsets[-1]), 'views_with_poses': int((counts > 0).sum())}
-        members = associate(pts, vis, self._essentials, threshold=cfg.epipolar_threshold_norm,
-                            min_joints=cfg.min_shared_joints,
-                            max_reference_views=cfg.max_reference_views,
-                            min_views=cfg.min_views)
-        x_all = np.concatenate(pts + [np.full((1, num_j, 2), np.nan)], axis=0)
-        w_all = np.concatenate(conf + [np.zeros((1, num_j))], axis=0)
-        gidx = np.where(members >= 0, members + offsets[:-1][None, :], offsets[-1])
-        info['candidates'] = len(members)
-        tri, members, gidx, swaps = self._triangulate(x_all, w_all, members, gidx)
-        info['swapped_pairs'] = swaps
+        members = associate_stacked(x, offsets, self._essentials,
+                                    threshold=cfg.epipolar_threshold_norm,
+                                    min_joints=cfg.min_shared_joints,
+                                    max_reference_views=cfg.max_reference_views,
+                                    min_views=cfg.min_views,
+                                    norm_coefficients=self._norm_coef)
+        info = {'poses_2d': int(offsets[-1]),
+                'views_with_poses': int((np.diff(offsets) > 0).sum()),
+                'candidates': len(members)}
+        pad = np.full((1, num_j), np.nan)
+        u_all = np.concatenate((x[..., 0], pad))
+        v_all = np.concatenate((x[..., 1], pad))
+        w_all = np.concatenate((conf, np.zeros((1, num_j))))
+        gidx = np.where(members >= 0, members, offsets[-1])
+        tri, members, gidx, swaps = self._triangulate(u_all, v_all, w_all, members, gidx)
         merged = 0
         if len(members) > 1 and cfg.merge_distance_m > 0:
             members, gidx, merged = self._merge(tri, members, gidx)
             if merged:
-                tri, members, gidx, swaps = self._triangulate(x_all, w_all, members, gidx)
-        info['merged'] = merged
-        ok = np.isfinite(tri.error_px)
-        info['poses_3d'] = len(members)
-        info['reprojection_error_px'] = float(np.median(tri.error_px[ok])) if ok.any() \
-            else float('nan')
+                tri, members, gidx, swaps = self._triangulate(u_all, v_all, w_all, members,
+                                                              gidx)
+        info.update(swapped_pairs=swaps, merged=merged, poses_3d=len(members))
+        err = tri.error_px[np.isfinite(tri.error_px)]
+        info['reprojection_error_px'] = float(np.median(err)) if err.size else float('nan')
         self.last_info = info
         return tri, members
 
-    def _triangulate(self, x_all, w_all, members, gidx):
+    def _triangulate(self, u_all, v_all, w_all, members, gidx):
         """Triangulate candidates, fix swaps, check bones, drop thin candidates."""
         cfg = self.config
-        points, weights = x_all[gidx], w_all[gidx]
+        g = gidx.T                                                       # [C, K]
+        u, v, w = u_all[g], v_all[g], w_all[g]                           # [C, K, J]
         gate = cfg.reprojection_gate_norm
-        tri = triangulate_robust(points, weights, self._projections, self._focal, gate,
-                                 cfg.min_views)
+        tri = triangulate_robust(u, v, w, self._projections, self._focal, gate,
+                                 cfg.min_views, self._basis)
         swaps = 0
-        if cfg.swap_check and len(members) and len(self._flip_pairs):
-            sw = swapped_views(points, weights, tri, self._projections, self._flip_pairs, gate,
+        if cfg.swap_check and len(self._flip_pairs) and tri.gated.any():
+            sw = swapped_views(u, v, w, tri, self._projections, self._flip_pairs, gate,
                                cfg.swap_ratio)
             if sw.any():
                 swaps = int(sw.sum())
-                points, weights = swap_pairs(points, weights, sw, self._flip_pairs)
-                tri = triangulate_robust(points, weights, self._projections, self._focal, gate,
-                                         cfg.min_views)
+                u, v, w = swap_pairs(u, v, w, sw, self._flip_pairs)
+                tri = triangulate_robust(u, v, w, self._projections, self._focal, gate,
+                                         cfg.min_views, self._basis)
         if cfg.bone_check and len(members):
             bad = bone_outliers(tri.joints, self._bones, self._bone_lo, self._bone_hi,
                                 tri.error)
             if bad.any():
                 _reject(tri, bad)
-        keep = np.isfinite(tri.joints).all(axis=-1).sum(axis=1) >= cfg.min_candidate_joints
+        keep = np.isfinite(tri.joints[..., 0]).sum(axis=1) >= cfg.min_candidate_joints
         if not keep.all():
             tri = _subset(tri, keep)
             members, gidx = members[keep], gidx[keep]
@@ -322,16 +347,16 @@ class Fusion:
         """Merge candidates closer than merge_distance_m seen by disjoint cameras; else NMS."""
         cfg = self.config
         dist = pose_distance(tri.joints, tri.joints, cfg.min_shared_joints)
-        iu = np.triu_indices(len(members), 1)
-        close = dist[iu] < cfg.merge_distance_m
+        close = np.triu(dist < cfg.merge_distance_m, 1)
         if not close.any():
             return members, gidx, 0
-        pairs = sorted(zip(dist[iu][close], iu[0][close], iu[1][close]))
+        ii, jj = np.nonzero(close)
+        order = np.argsort(dist[ii, jj], kind='stable')
         alive = np.ones(len(members), dtype=bool)
         members, gidx = members.copy(), gidx.copy()
         strength = tri.num_views.sum(axis=1)
         merged = 0
-        for _, i, j in pairs:
+        for i, j in zip(ii[order].tolist(), jj[order].tolist()):
             if not (alive[i] and alive[j]):
                 continue
             a, b = members[i] >= 0, members[j] >= 0
@@ -347,78 +372,83 @@ class Fusion:
         return members[alive], gidx[alive], merged
 
     # ------------------------------------------------------------------ output
-    def _output(self, t: TrackRecord, tri: Triangulation, members: np.ndarray,
-                stamp: float) -> Track:
+    def _outputs(self, det: np.ndarray, previous: np.ndarray, tri: Triangulation,
+                 members: np.ndarray, stamp: float) -> List[Track]:
+        """Build the Track of every live track (vectorised over tracks)."""
         cfg = self.config
-        num_j = self.layout.num_joints
-        if t.extra is None:
-            filt = None
-            if cfg.smoothing == 'causal':
-                filt = CausalFilter(num_j, cfg.smoothing_alpha, cfg.smoothing_beta,
-                                    cfg.max_gap_s, cfg.smoothing_reset_m)
-            t.extra = _Extra(num_j, filt)
-        ex: _Extra = t.extra
-        d = t.detection
-        if d >= 0:
-            z = tri.joints[d]
-            seen = np.isfinite(z).all(axis=-1)
-            ex.confidence = np.where(seen, tri.confidence[d], ex.confidence)
-            num_views = tri.num_views[d].astype(np.uint8)
-            err = np.where(seen, tri.error_px[d], np.nan)
-            ex.cameras = tuple(self.camera_names[c] for c in np.nonzero(members[d] >= 0)[0])
+        tr: Tracks = self.tracker.tracks
+        num_t, num_j = len(tr), self.layout.num_joints
+        seen = det >= 0
+        # Row K of the padded arrays is "not observed".
+        z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan)))[det]
+        conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j))))[det]
+        num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int)))[det]
+        err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan)))[det]
+        conf_prev = np.where((previous >= 0)[:, None],
+                             self._confidence[np.maximum(previous, 0)] if len(self._confidence)
+                             else 0.0, 0.0)
+        observed = np.isfinite(z[..., 0])
+        conf_last = np.where(observed, conf_obs, conf_prev)
+        self._confidence = conf_last
+        if self._filter is not None:
+            self._filter.reindex(previous)
+            joints, state = self._filter.update(z, stamp)
         else:
-            z = np.full((num_j, 3), np.nan)
-            num_views = np.zeros(num_j, dtype=np.uint8)
-            err = np.full(num_j, np.nan)
-            ex.cameras = ()
-        if ex.filter is not None:
-            joints, state = ex.filter.update(z, stamp)
-            velocity_j = ex.filter.v
-        else:
-            if d >= 0:
-                joints = z.copy()
-                state = np.where(seen, JointState.TRIANGULATED, JointState.MISSING)
-            else:
-                joints = t.predicted(stamp, cfg.tracking_prediction).copy()
-                state = np.where(np.isfinite(joints).all(axis=-1), JointState.PREDICTED,
-                                 JointState.MISSING)
-            state = state.astype(np.uint8)
-            velocity_j = None
+            pred = tr.predicted(stamp, cfg.tracking_prediction)
+            joints = np.where(seen[:, None, None], z, pred)
+            ok = np.isfinite(joints[..., 0])
+            state = np.where(observed, np.uint8(JointState.TRIANGULATED),
+                             np.where(ok, np.uint8(JointState.PREDICTED),
+                                      np.uint8(JointState.MISSING))).astype(np.uint8)
+            joints = np.where(ok[..., None], joints, np.nan)
         missing = state == JointState.MISSING
-        joints[missing] = np.nan
-        predicted = state == JointState.PREDICTED
-        confidence = np.where(missing, 0.0, np.where(predicted, 0.5 * ex.confidence,
-                                                     ex.confidence))
-        position = np.full(3, np.nan)
-        velocity = t.velocity.copy()
+        confidence = np.where(missing, 0.0,
+                              np.where(state == JointState.PREDICTED, 0.5, 1.0) * conf_last)
+        position = np.full((num_t, 3), np.nan)
+        velocity = tr.velocity
         if self._root is not None:
-            r = joints[self._root]
-            if np.isfinite(r).all():
-                position = r.mean(axis=0)
-                if velocity_j is not None and not missing[self._root].any():
-                    velocity = velocity_j[self._root].mean(axis=0)
-        score = float(confidence.mean()) if num_j else 0.0
-        if d < 0 and cfg.max_coast_s > 0:
-            score *= max(0.0, 1.0 - (stamp - t.last_observed) / cfg.max_coast_s)
-        return Track(track_id=t.track_id, state=t.state, joints=joints,
-                     confidence=confidence, joint_state=state, num_views=num_views,
-                     reprojection_error=err, position=position, velocity=velocity,
-                     first_seen=t.first_seen, last_observed=t.last_observed, age=t.hits,
-                     missed=t.missed, score=score, source_cameras=ex.cameras)
+            position = joints[:, self._root].mean(axis=1)
+            if self._filter is not None:
+                vj = self._filter.v[:, self._root].mean(axis=1)
+                root_ok = ~missing[:, self._root].any(axis=1)
+                velocity = np.where(root_ok[:, None], vj, velocity)
+        score = confidence.mean(axis=1) if num_j else np.zeros(num_t)
+        if cfg.max_coast_s > 0:
+            score = score * np.clip(1.0 - (stamp - tr.last_observed) / cfg.max_coast_s, 0, 1)
+        num_views = num_views.astype(np.uint8)
+        names = self.camera_names
+        view_sets = [tuple(names[c] for c in np.nonzero(members[d] >= 0)[0]) if d >= 0 else ()
+                     for d in det.tolist()]
+        out = [Track(track_id=int(tr.ids[i]), state=TrackState(int(tr.state[i])),
+                     joints=joints[i], confidence=confidence[i], joint_state=state[i],
+                     num_views=num_views[i], reprojection_error=err[i],
+                     position=position[i], velocity=velocity[i],
+                     first_seen=float(tr.first_seen[i]),
+                     last_observed=float(tr.last_observed[i]), age=int(tr.hits[i]),
+                     missed=int(tr.missed[i]), score=float(score[i]),
+                     source_cameras=view_sets[i])
+               for i in range(num_t)]
+        out.sort(key=lambda t: t.track_id)
+        return out
 
-    def _tombstone(self, t: TrackRecord) -> Track:
+    def _tombstones(self, dead: Tracks) -> List[Track]:
         num_j = self.layout.num_joints
-        position = np.full(3, np.nan)
-        if self._root is not None and np.isfinite(t.pose[self._root]).all():
-            position = t.pose[self._root].mean(axis=0)
-        return Track(track_id=t.track_id, state=TrackState.DELETED,
-                     joints=np.full((num_j, 3), np.nan), confidence=np.zeros(num_j),
-                     joint_state=np.zeros(num_j, dtype=np.uint8),
-                     num_views=np.zeros(num_j, dtype=np.uint8),
-                     reprojection_error=np.full(num_j, np.nan), position=position,
-                     velocity=np.full(3, np.nan), first_seen=t.first_seen,
-                     last_observed=t.last_observed, age=t.hits, missed=t.missed, score=0.0,
-                     source_cameras=())
+        out = []
+        for i in range(len(dead)):
+            position = np.full(3, np.nan)
+            if self._root is not None and np.isfinite(dead.pose[i, self._root]).all():
+                position = dead.pose[i, self._root].mean(axis=0)
+            out.append(Track(track_id=int(dead.ids[i]), state=TrackState.DELETED,
+                             joints=np.full((num_j, 3), np.nan), confidence=np.zeros(num_j),
+                             joint_state=np.zeros(num_j, dtype=np.uint8),
+                             num_views=np.zeros(num_j, dtype=np.uint8),
+                             reprojection_error=np.full(num_j, np.nan), position=position,
+                             velocity=np.full(3, np.nan),
+                             first_seen=float(dead.first_seen[i]),
+                             last_observed=float(dead.last_observed[i]),
+                             age=int(dead.hits[i]), missed=int(dead.missed[i]), score=0.0,
+                             source_cameras=()))
+        return out
 
 
 def _reject(tri: Triangulation, bad: np.ndarray) -> None:
@@ -428,14 +458,15 @@ def _reject(tri: Triangulation, bad: np.ndarray) -> None:
     tri.num_views[bad] = 0
     tri.error[bad] = np.nan
     tri.error_px[bad] = np.nan
-    tri.used &= ~bad[:, None, :]
+    tri.used &= ~bad
 
 
 def _subset(tri: Triangulation, keep: np.ndarray) -> Triangulation:
     """Return the candidates ``keep`` of ``tri``."""
     return Triangulation(joints=tri.joints[keep], confidence=tri.confidence[keep],
                          num_views=tri.num_views[keep], error=tri.error[keep],
-                         error_px=tri.error_px[keep], used=tri.used[keep])
+                         error_px=tri.error_px[keep], used=tri.used[:, keep],
+                         gated=tri.gated[keep])
 
 
 def _normalised_bounds(cam: Camera, samples: int = 9) -> np.ndarray:

@@ -36,66 +36,86 @@ from scipy.ndimage import gaussian_filter1d
 
 
 class CausalFilter:
-    """Per-joint alpha-beta filter of one track's ``[J, D]`` positions over time."""
+    """
+    Per-joint alpha-beta filters of ``[T, J, D]`` positions (T tracks) over time.
+
+    All rows are updated together at each stamp; ``reindex`` follows the tracker when tracks
+    are born or deleted. A ``[J, D]`` input is treated as a single track.
+    """
 
     def __init__(self, num_joints: int, alpha: float = 0.6, beta: float = 0.25,
-                 max_gap_s: float = 0.3, reset_m: float = 0.5, dims: int = 3) -> None:
+                 max_gap_s: float = 0.3, reset_m: float = 0.5, dims: int = 3,
+                 rows: int = 0) -> None:
         """Create the filter; ``alpha`` and ``beta`` in (0, 1], as per-update gains."""
         if not (0 < alpha <= 1 and 0 <= beta <= 1):
             raise ValueError(f'CausalFilter: need 0 < alpha <= 1 and 0 <= beta <= 1, '
                              f'got alpha={alpha}, beta={beta}')
         self.alpha, self.beta = float(alpha), float(beta)
         self.max_gap_s, self.reset_m = float(max_gap_s), float(reset_m)
-        self.x = np.full((num_joints, dims), np.nan)
-        self.v = np.zeros((num_joints, dims))
-        self.count = np.zeros(num_joints, dtype=int)       # observations since (re)start
-        self.last_seen = np.full(num_joints, -np.inf)       # stamp of the last observation
+        self.x = np.full((rows, num_joints, dims), np.nan)
+        self.v = np.zeros((rows, num_joints, dims))
+        self.count = np.zeros((rows, num_joints), dtype=int)   # observations since (re)start
+        self.last_seen = np.full((rows, num_joints), -np.inf)   # stamp of the last observation
         self.stamp: Optional[float] = None
+
+    def reindex(self, previous: np.ndarray) -> None:
+        """Rearrange rows: new row ``i`` continues old row ``previous[i]`` (-1 = a new track)."""
+        previous = np.asarray(previous, dtype=int)
+        new = previous < 0
+        src = np.where(new, 0, previous)
+        if len(self.x) == 0:
+            shape = (len(previous),) + self.x.shape[1:]
+            self.x, self.v = np.full(shape, np.nan), np.zeros(shape)
+            self.count = np.zeros(shape[:2], dtype=int)
+            self.last_seen = np.full(shape[:2], -np.inf)
+            return
+        self.x = np.where(new[:, None, None], np.nan, self.x[src])
+        self.v = np.where(new[:, None, None], 0.0, self.v[src])
+        self.count = np.where(new[:, None], 0, self.count[src])
+        self.last_seen = np.where(new[:, None], -np.inf, self.last_seen[src])
 
     def update(self, z: np.ndarray, stamp: float) -> Tuple[np.ndarray, np.ndarray]:
         """
-        Fold in observations ``z [J, D]`` (NaN = not observed) taken at ``stamp`` seconds.
+        Fold in observations ``z [T, J, D]`` (NaN = not observed) taken at ``stamp`` seconds.
 
-        Returns the filtered positions ``[J, D]`` (NaN where unknown) and the ``[J]`` uint8
+        Returns the filtered positions (NaN where unknown) and the ``[T, J]`` uint8
         JointState: TRIANGULATED (observed now), PREDICTED (gap filled) or MISSING.
         """
+        single = z.ndim == 2
+        if single:
+            z = z[None]
+            if len(self.x) == 0:
+                self.reindex(np.array([-1]))
         dt = 0.0 if self.stamp is None else max(stamp - self.stamp, 0.0)
         self.stamp = stamp
-        obs = np.isfinite(z).all(axis=-1)
+        obs = np.isfinite(z[..., 0])
         live = self.count > 0
         pred = self.x + self.v * dt
         resid = z - pred
-        with np.errstate(invalid='ignore'):
-            jump = np.linalg.norm(resid, axis=-1) > self.reset_m
-        start = obs & (~live | jump)
-        second = obs & live & ~jump & (self.count == 1) & (dt > 0)
-        track = obs & live & ~jump & ~second
-        x = np.where(live[:, None], pred, np.nan)
-        v = self.v.copy()
-        # first observation (or restart): take it, no velocity yet
-        x[start] = z[start]
-        v[start] = 0.0
-        # second observation: two-point velocity initialisation
-        if second.any():
-            v[second] = (z[second] - self.x[second]) / dt
-            x[second] = z[second]
-        # steady state: alpha-beta correction
-        x[track] = pred[track] + self.alpha * resid[track]
-        if dt > 0:
-            v[track] = v[track] + (self.beta / dt) * resid[track]
-        # gaps: keep the prediction while young enough, else forget the joint
-        gap = ~obs & live
-        expired = gap & (stamp - self.last_seen > self.max_gap_s)
-        x[expired] = np.nan
-        v[expired] = 0.0
+        with np.errstate(invalid='ignore', divide='ignore'):
+            jump = (resid * resid).sum(axis=-1) > self.reset_m ** 2      # NaN -> False
+            start = obs & (~live | jump)
+            second = obs & ~start & (self.count == 1) & (dt > 0)
+            steady = obs & ~start & ~second
+            gap = ~obs & live
+            hold = gap & (stamp - self.last_seen <= self.max_gap_s)
+            x = np.where((start | second)[..., None], z,
+                         np.where(steady[..., None], pred + self.alpha * resid,
+                                  np.where(hold[..., None], pred, np.nan)))
+            gain = self.beta / dt if dt > 0 else 0.0
+            v = np.where(second[..., None], (z - self.x) / (dt if dt > 0 else 1.0),
+                         np.where(steady[..., None], self.v + gain * resid,
+                                  np.where(hold[..., None], self.v, 0.0)))
         self.count = np.where(start, 1, np.where(obs, self.count + 1,
-                                                 np.where(expired, 0, self.count)))
+                                                 np.where(hold, self.count, 0)))
         self.last_seen = np.where(obs, stamp, self.last_seen)
         self.x, self.v = x, v
-        state = np.full(len(x), JointState.MISSING, dtype=np.uint8)
-        state[gap & ~expired] = JointState.PREDICTED
-        state[obs] = JointState.TRIANGULATED
-        return x.copy(), state
+        state = np.where(obs, np.uint8(JointState.TRIANGULATED),
+                         np.where(hold, np.uint8(JointState.PREDICTED),
+                                  np.uint8(JointState.MISSING))).astype(np.uint8)
+        if single:
+            return x[0].copy(), state[0]
+        return x, state
 
 
 def interpolate_gaps(traj: np.ndarray, max_gap: int) -> Tuple[np.ndarray, np.ndarray]:

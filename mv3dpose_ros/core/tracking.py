@@ -21,17 +21,21 @@ Each set of 3D poses is matched to the live tracks by a gated Hungarian solve. T
 on the ground plane (x, y; world z is up). A pair is accepted below the gate
 ``gate_m + gate_growth_mps * (time since the track was last observed)``: the paper's
 tau = 0.2 m between consecutive frames, widened for tracks that were not seen for a while and
-for low frame rates. With ``predict`` each track is first moved by its root velocity (constant
-velocity), so walking people stay inside the gate at low frame rates.
+for low frame rates. With ``predict`` each track is first moved by its velocity (constant
+velocity of the whole body, estimated from the joints seen in consecutive observations), so
+walking people stay inside the gate at low frame rates.
 
 Life cycle: a new track is TENTATIVE; after ``confirm_hits`` observations it is CONFIRMED; a
-confirmed track that misses a set is COASTING until it is observed again (CONFIRMED) or
-``max_coast_s`` pass without observation (DELETED). A TENTATIVE track that misses a set is
-DELETED at once. Ids start at 1 and are never reused by a tracker.
+confirmed track that misses a set is COASTING until it is observed again (CONFIRMED) or more
+than ``max_coast_s`` pass without observation (DELETED). A TENTATIVE track that misses a set is
+DELETED at once. Ids start at 1 and are never reused by a tracker, not even after ``reset``.
+
+Tracks are kept as a structure of arrays (``Tracks``), so an update costs the same few numpy
+operations whatever the number of people.
 """
 
-from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from dataclasses import dataclass, fields
+from typing import Optional, Tuple
 
 from mv3dpose_ros.core.types import TrackState
 import numpy as np
@@ -49,40 +53,63 @@ class TrackerConfig:
     confirm_hits: int = 3
     max_coast_s: float = 1.0
     min_birth_joints: int = 6
-    velocity_smoothing: float = 0.5
+    velocity_smoothing: float = 0.5     # weight of the old velocity in its running average
 
 
 @dataclass
-class TrackRecord:
-    """Internal state of one track (the tracker's view, before output smoothing)."""
+class Tracks:
+    """The tracks of a tracker, one row each (T rows)."""
 
-    track_id: int
-    state: TrackState
-    pose: np.ndarray              # [J, 3] last observed joints, older values where missing
-    first_seen: float
-    last_observed: float
-    last_stamp: float             # stamp of the last update (observed or not)
-    hits: int = 1
-    missed: int = 0
-    velocity: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))  # root m/s
-    fresh: Optional[np.ndarray] = None   # [J] joints refreshed by the last observation
-    detection: int = -1           # index of the pose matched in this update, -1 = none
-    extra: Optional[object] = None   # per-track data of the caller (e.g. its smoother)
+    ids: np.ndarray             # [T] int64, > 0
+    state: np.ndarray           # [T] int8 TrackState
+    pose: np.ndarray            # [T, J, 3] last observed joints (older values where missing)
+    fresh: np.ndarray           # [T, J] joints refreshed by the last observation
+    velocity: np.ndarray        # [T, 3] m/s, NaN until two observations
+    first_seen: np.ndarray      # [T] s
+    last_observed: np.ndarray   # [T] s
+    hits: np.ndarray            # [T] observations
+    missed: np.ndarray          # [T] consecutive updates without observation
+
+    @classmethod
+    def empty(cls, num_joints: int) -> 'Tracks':
+        """Return zero tracks."""
+        return cls(ids=np.zeros(0, dtype=np.int64), state=np.zeros(0, dtype=np.int8),
+                   pose=np.zeros((0, num_joints, 3)), fresh=np.zeros((0, num_joints), bool),
+                   velocity=np.zeros((0, 3)), first_seen=np.zeros(0),
+                   last_observed=np.zeros(0), hits=np.zeros(0, dtype=np.int64),
+                   missed=np.zeros(0, dtype=np.int64))
+
+    def __len__(self) -> int:
+        """Return the number of tracks."""
+        return len(self.ids)
+
+    def take(self, rows: np.ndarray) -> 'Tracks':
+        """Return the tracks ``rows`` (index or mask) as a new ``Tracks``."""
+        return Tracks(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
 
     def predicted(self, stamp: float, predict: bool = True) -> np.ndarray:
-        """Return the pose moved by the root velocity to ``stamp`` (no-op without velocity)."""
-        if not predict or not np.isfinite(self.velocity).all():
+        """Return ``[T, J, 3]`` poses moved by their velocity to ``stamp`` (when known)."""
+        if not predict or not len(self):
             return self.pose
-        return self.pose + self.velocity * (stamp - self.last_observed)
+        shift = np.nan_to_num(self.velocity) * (stamp - self.last_observed)[:, None]
+        return self.pose + shift[:, None, :]
+
+
+@dataclass
+class TrackUpdate:
+    """What ``Tracker.update`` did, per live track (rows of ``Tracker.tracks``)."""
+
+    detection: np.ndarray   # [T] index of the pose observed this update, -1 = none
+    previous: np.ndarray    # [T] row of the track before the update, -1 = born now
+    deleted: Tracks         # tracks deleted in this update (state DELETED), reported once
 
 
 def centroid(poses: np.ndarray) -> np.ndarray:
     """Return the ``[..., 3]`` mean of the finite joints of ``[..., J, 3]`` poses (NaN if none)."""
-    ok = np.isfinite(poses).all(axis=-1)
+    ok = np.isfinite(poses[..., 0])
     n = ok.sum(axis=-1)
     with np.errstate(invalid='ignore', divide='ignore'):
-        return np.where(ok[..., None], poses, 0.0).sum(axis=-2) / np.where(n > 0, n, np.nan)[
-            ..., None]
+        return np.where(ok[..., None], poses, 0.0).sum(axis=-2) / n[..., None]
 
 
 def pose_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int = 3) -> np.ndarray:
@@ -95,109 +122,125 @@ def pose_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int = 3) -> n
     diff = np.linalg.norm(a[:, None] - b[None], axis=-1)            # [A, B, J], NaN if missing
     ok = np.isfinite(diff)
     n = ok.sum(axis=-1)
-    mean = np.where(ok, diff, 0.0).sum(axis=-1) / np.maximum(n, 1)
-    ca, cb = centroid(a)[:, :2], centroid(b)[:, :2]
-    ground = np.linalg.norm(ca[:, None] - cb[None], axis=-1)
-    cost = np.where(n >= min_shared_joints, mean, ground)
-    return np.where(np.isfinite(cost), cost, np.inf)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        mean = np.where(ok, diff, 0.0).sum(axis=-1) / n
+        if (n < min_shared_joints).any():
+            ca, cb = centroid(a)[:, :2], centroid(b)[:, :2]
+            ground = np.linalg.norm(ca[:, None] - cb[None], axis=-1)
+            mean = np.where(n >= min_shared_joints, mean, ground)
+    return np.where(np.isfinite(mean), mean, np.inf)
+
+
+def gated_assignment(cost: np.ndarray, gate) -> Tuple[np.ndarray, np.ndarray]:
+    """Hungarian matching of the pairs with ``cost < gate`` only (others never block)."""
+    feasible = cost < gate
+    if not feasible.any():
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+    rows, cols = linear_sum_assignment(np.where(feasible, cost, 1e9))
+    keep = feasible[rows, cols]
+    return rows[keep], cols[keep]
 
 
 class Tracker:
     """Assign 3D poses to tracks over time and run their life cycle."""
 
-    def __init__(self, config: Optional[TrackerConfig] = None, root_joints=None) -> None:
-        """Create an empty tracker; ``root_joints`` (indices) define the root, else centroid."""
+    def __init__(self, num_joints: int, config: Optional[TrackerConfig] = None) -> None:
+        """Create an empty tracker for poses of ``num_joints`` joints."""
         self.config = config or TrackerConfig()
-        self.root_joints = None if root_joints is None else np.asarray(root_joints, dtype=int)
-        self.tracks: List[TrackRecord] = []
+        self.num_joints = int(num_joints)
+        self.tracks = Tracks.empty(self.num_joints)
         self.next_id = 1
 
-    def reset(self) -> List[TrackRecord]:
+    def reset(self) -> Tracks:
         """Drop all tracks (ids keep counting up) and return them marked DELETED."""
         dropped = self.tracks
-        for t in dropped:
-            t.state = TrackState.DELETED
-            t.detection = -1
-        self.tracks = []
+        dropped.state = np.full(len(dropped), TrackState.DELETED, dtype=np.int8)
+        self.tracks = Tracks.empty(self.num_joints)
         return dropped
 
-    def root(self, pose: np.ndarray) -> np.ndarray:
-        """Return the root of a ``[J, 3]`` pose: mean of the root joints, else the centroid."""
-        if self.root_joints is not None:
-            r = pose[self.root_joints]
-            if np.isfinite(r).all():
-                return r.mean(axis=0)
-        return centroid(pose)
-
-    def update(self, poses: np.ndarray, stamp: float, can_birth: Optional[np.ndarray] = None
-               ) -> Tuple[List[TrackRecord], List[TrackRecord]]:
+    def update(self, poses: np.ndarray, stamp: float,
+               can_birth: Optional[np.ndarray] = None) -> TrackUpdate:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
 
-        Returns ``(live, deleted)``: the live tracks after the update (``detection`` = index of
-        their pose, -1 if not observed this time, new tracks included) and the tracks deleted
-        in this update (state DELETED, each reported once). Unmatched poses start tracks only
-        where ``can_birth [D]`` (default: all) holds and they have ``min_birth_joints``.
+        Updates ``self.tracks`` (live tracks: matched, coasting, and new ones last) and returns
+        which pose each live track took. Unmatched poses start tracks only where
+        ``can_birth [D]`` (default: all) holds and they have ``min_birth_joints`` joints.
         """
         cfg = self.config
-        num_det = len(poses)
-        det_idx = np.full(len(self.tracks), -1)
-        if self.tracks and num_det:
-            pred = np.stack([t.predicted(stamp, cfg.predict) for t in self.tracks])
-            cost = pose_distance(pred, poses, cfg.min_shared_joints)
-            since = np.array([stamp - t.last_observed for t in self.tracks])
-            gate = cfg.gate_m + cfg.gate_growth_mps * np.maximum(since, 0.0)
-            feasible = cost < gate[:, None]
-            if feasible.any():
-                rows, cols = linear_sum_assignment(np.where(feasible, cost, 1e6))
-                keep = feasible[rows, cols]
-                det_idx[rows[keep]] = cols[keep]
-        used = np.zeros(num_det, dtype=bool)
-        live, deleted = [], []
-        for t, d in zip(self.tracks, det_idx):
-            t.detection = int(d)
-            if d >= 0:
-                used[d] = True
-                self._observe(t, poses[d], stamp)
-                live.append(t)
-                continue
-            t.missed += 1
-            t.last_stamp = stamp
-            if t.state == TrackState.TENTATIVE or stamp - t.last_observed > cfg.max_coast_s:
-                t.state = TrackState.DELETED
-                deleted.append(t)
-            else:
-                t.state = TrackState.COASTING
-                live.append(t)
-        for d in np.nonzero(~used)[0]:
-            pose = poses[d]
-            if np.isfinite(pose).all(axis=-1).sum() < cfg.min_birth_joints or (
-                    can_birth is not None and not can_birth[d]):
-                continue
-            t = TrackRecord(track_id=self.next_id, state=TrackState.TENTATIVE,
-                            pose=pose.copy(), first_seen=stamp, last_observed=stamp,
-                            last_stamp=stamp, detection=int(d),
-                            fresh=np.isfinite(pose).all(axis=-1))
-            if cfg.confirm_hits <= 1:
-                t.state = TrackState.CONFIRMED
-            self.next_id += 1
-            live.append(t)
+        tr = self.tracks
+        num_t, num_d = len(tr), len(poses)
+        det = np.full(num_t, -1)
+        if num_t and num_d:
+            cost = pose_distance(tr.predicted(stamp, cfg.predict), poses, cfg.min_shared_joints)
+            gate = cfg.gate_m + cfg.gate_growth_mps * np.maximum(stamp - tr.last_observed, 0.0)
+            rows, cols = gated_assignment(cost, gate[:, None])
+            det[rows] = cols
+        hit = det >= 0
+        if hit.any():
+            self._observe(hit, poses[det[hit]], stamp)
+        coast = ~hit & (tr.state != TrackState.TENTATIVE) \
+            & (stamp - tr.last_observed <= cfg.max_coast_s)
+        keep = hit | coast
+        tr.missed = np.where(hit, 0, tr.missed + 1)
+        tr.state = np.where(coast, np.int8(TrackState.COASTING), tr.state).astype(np.int8)
+        deleted = tr.take(~keep)
+        deleted.state[:] = TrackState.DELETED
+        kept = np.nonzero(keep)[0]
+        live = tr.take(kept)
+        used = np.zeros(num_d, dtype=bool)
+        used[det[hit]] = True
+        born = ~used
+        if num_d:
+            born &= np.isfinite(poses[..., 0]).sum(axis=1) >= cfg.min_birth_joints
+            if can_birth is not None:
+                born &= can_birth
+        new = np.nonzero(born)[0]
+        if len(new):
+            live = _concat(live, self._births(poses[new], stamp))
         self.tracks = live
-        return live, deleted
+        return TrackUpdate(detection=np.concatenate((det[kept], new)),
+                           previous=np.concatenate((kept, np.full(len(new), -1))),
+                           deleted=deleted)
 
-    def _observe(self, t: TrackRecord, pose: np.ndarray, stamp: float) -> None:
-        dt = stamp - t.last_observed
-        ok = np.isfinite(pose).all(axis=-1)
-        both = ok & t.fresh if t.fresh is not None else ok & np.isfinite(t.pose).all(axis=-1)
-        if dt > 0 and both.sum() >= self.config.min_shared_joints:
-            v = (pose[both] - t.pose[both]).mean(axis=0) / dt
-            a = self.config.velocity_smoothing
-            t.velocity = v if not np.isfinite(t.velocity).all() else a * t.velocity + (1 - a) * v
-        t.pose = np.where(ok[:, None], pose, t.pose)
-        t.fresh = ok
-        t.hits += 1
-        t.missed = 0
-        t.last_observed = stamp
-        t.last_stamp = stamp
-        if t.state == TrackState.COASTING or t.hits >= self.config.confirm_hits:
-            t.state = TrackState.CONFIRMED
+    def _births(self, poses: np.ndarray, stamp: float) -> Tracks:
+        n = len(poses)
+        state = TrackState.CONFIRMED if self.config.confirm_hits <= 1 else TrackState.TENTATIVE
+        ids = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
+        self.next_id += n
+        return Tracks(ids=ids, state=np.full(n, state, dtype=np.int8), pose=poses.copy(),
+                      fresh=np.isfinite(poses[..., 0]), velocity=np.full((n, 3), np.nan),
+                      first_seen=np.full(n, stamp), last_observed=np.full(n, stamp),
+                      hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
+
+    def _observe(self, hit: np.ndarray, obs: np.ndarray, stamp: float) -> None:
+        """Fold the observations ``obs`` into the tracks ``hit`` (mask)."""
+        cfg = self.config
+        tr = self.tracks
+        old = tr.pose[hit]
+        dt = stamp - tr.last_observed[hit]
+        ok = np.isfinite(obs[..., 0])
+        both = ok & tr.fresh[hit]
+        n = both.sum(axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            v = np.where(both[..., None], obs - old, 0.0).sum(axis=1) / (n * dt)[:, None]
+        good = (n >= cfg.min_shared_joints) & (dt > 0)
+        prev = tr.velocity[hit]
+        a = cfg.velocity_smoothing
+        blended = np.where(np.isfinite(prev), a * prev + (1 - a) * v, v)
+        vel = tr.velocity.copy()
+        vel[hit] = np.where(good[:, None], blended, prev)
+        pose = tr.pose.copy()
+        pose[hit] = np.where(ok[..., None], obs, old)
+        fresh = tr.fresh.copy()
+        fresh[hit] = ok
+        tr.pose, tr.fresh, tr.velocity = pose, fresh, vel
+        tr.hits = tr.hits + hit
+        tr.last_observed = np.where(hit, stamp, tr.last_observed)
+        confirm = hit & ((tr.state == TrackState.COASTING) | (tr.hits >= cfg.confirm_hits))
+        tr.state = np.where(confirm, np.int8(TrackState.CONFIRMED), tr.state).astype(np.int8)
+
+
+def _concat(a: Tracks, b: Tracks) -> Tracks:
+    return Tracks(**{f.name: np.concatenate((getattr(a, f.name), getattr(b, f.name)))
+                     for f in fields(a)})

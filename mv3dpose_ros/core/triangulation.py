@@ -15,18 +15,22 @@
 """
 Multi-view triangulation of person candidates, vectorised over people, cameras and joints.
 
-Inputs are dense over the rig: ``points [K, C, J, 2]`` normalised image coordinates of candidate
-``k`` in camera ``c`` and ``weights [K, C, J]`` (0 where the camera does not see the joint), with
+Inputs are dense over the rig and camera-major: ``u, v [C, K, J]`` normalised image coordinates
+of joint ``j`` of candidate ``k`` in camera ``c`` and ``w [C, K, J]`` its weight (detector
+confidence; 0 where the camera does not see the joint, then u and v are ignored), with
 normalised projection matrices ``projections [C, 3, 4] = [R | t]`` (world metres -> camera).
-Distances are in normalised image units (pixels / focal length) unless a name says ``_px``.
+Camera-major, contiguous arrays keep every operation a flat elementwise op or one matrix
+product, which is what makes the per-step cost small. Distances are in normalised image units
+(pixels / focal length) unless a name says ``_px``.
 
-The weighted DLT solves the 3x3 normal equations of the inhomogeneous system per joint, then
-re-weights each view by ``1 / depth^2`` once, so the minimised residual approximates the
-confidence-weighted reprojection error rather than the depth-scaled algebraic one.
+The weighted DLT solves the 3x3 normal equations of the inhomogeneous system per joint (Cramer's
+rule over all joints at once), then re-weights each view by ``1 / depth^2`` once, so the
+minimised residual approximates the confidence-weighted reprojection error rather than the
+depth-scaled algebraic one.
 """
 
 from dataclasses import dataclass
-from typing import Dict, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -81,53 +85,91 @@ def bone_length_limits(joint_names: Sequence[str], bones: Sequence[Tuple[int, in
     return lo, hi
 
 
-def triangulate_dlt(points: np.ndarray, weights: np.ndarray, projections: np.ndarray,
-                    reweight: bool = True) -> np.ndarray:
+def dlt_basis(projections: np.ndarray) -> np.ndarray:
     """
-    Triangulate ``[K, J, 3]`` world points by confidence-weighted N-view DLT.
+    Return the ``[16, C * 4]`` basis of the per-view DLT normal matrices.
 
-    Joints seen (weight > 0) by fewer than two cameras, or whose normal equations are
-    singular, come out NaN.
+    The normal matrix of view ``c`` seeing normalised point ``(u, v)`` with weight ``w`` is
+    ``w (u^2 + v^2) P3 P3^T - w u (P1 P3^T + P3 P1^T) - w v (P2 P3^T + P3 P2^T)
+    + w (P1 P1^T + P2 P2^T)`` for the rows ``P1, P2, P3`` of ``[R | t]``, so the sum over all
+    views of all joints is one matrix product of this basis with the coefficients.
     """
-    pts = np.where(weights[..., None] > 0, points, 0.0)
-    w = np.where(weights > 0, weights, 0.0)
-    # Rows u * P3 - P1 and v * P3 - P2 of the DLT system: [K, C, J, 2, 4].
-    rows = pts[..., :, None] * projections[None, :, None, 2:3, :] \
-        - projections[None, :, None, :2, :]
-    x = _solve(rows, w)
+    p1, p2, p3 = projections[:, 0], projections[:, 1], projections[:, 2]
+
+    def outer(a, b):
+        return a[:, :, None] * b[:, None, :]
+
+    basis = np.stack([outer(p3, p3), -(outer(p1, p3) + outer(p3, p1)),
+                      -(outer(p2, p3) + outer(p3, p2)), outer(p1, p1) + outer(p2, p2)], axis=1)
+    return basis.reshape(len(projections) * 4, 16).T.copy()
+
+
+def _normal_solve(u: np.ndarray, v: np.ndarray, w: np.ndarray, basis: np.ndarray,
+                  enough: np.ndarray) -> np.ndarray:
+    """Solve the weighted DLT normal equations of all joints; return ``[3, K, J]`` (NaN: fail)."""
+    c, k, j = w.shape
+    coef = np.stack([w * (u * u + v * v), w * u, w * v, w], axis=1)      # [C, 4, K, J]
+    m = basis @ coef.reshape(c * 4, k * j)                               # [16, K*J]
+    a00, a01, a02, b0 = m[0], m[1], m[2], -m[3]
+    a11, a12, b1 = m[5], m[6], -m[7]
+    a22, b2 = m[10], -m[11]
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    trace = a00 + a11 + a22
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ok = enough.ravel() & (np.abs(det) > 1e-12 * trace * trace * trace)
+        inv = np.where(ok, 1.0 / det, np.nan)
+    x = np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
+                  (c01 * b0 + c11 * b1 + c12 * b2) * inv,
+                  (c02 * b0 + c12 * b1 + c22 * b2) * inv])
+    return x.reshape(3, k, j)
+
+
+def triangulate_dlt(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np.ndarray,
+                    reweight: bool = True, basis: Optional[np.ndarray] = None) -> np.ndarray:
+    """
+    Triangulate world points ``[3, K, J]`` by confidence-weighted N-view DLT.
+
+    ``u, v, w [C, K, J]`` (camera-major). Joints seen (w > 0) by fewer than two cameras, or
+    whose normal equations are singular, come out NaN. ``basis`` is ``dlt_basis(projections)``
+    if precomputed.
+    """
+    if basis is None:
+        basis = dlt_basis(projections)
+    seen = w > 0
+    u, v, w = np.where(seen, u, 0.0), np.where(seen, v, 0.0), np.where(seen, w, 0.0)
+    enough = seen.sum(axis=0) >= 2
+    x = _normal_solve(u, v, w, basis, enough)
     if reweight:
-        depth = np.einsum('ca,kja->kcj', projections[:, 2, :3], x) + projections[None, :, 2, 3:]
-        with np.errstate(invalid='ignore'):
-            good = np.isfinite(depth) & (depth > 1e-6)
-        w2 = np.where(good, w / np.where(good, depth, 1.0) ** 2, 0.0)
-        x2 = _solve(rows, w2)
+        depth = _depth(x, projections)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            w2 = np.where(depth > 1e-6, w / (depth * depth), 0.0)
+        x2 = _normal_solve(u, v, w2, basis, enough)
         x = np.where(np.isfinite(x2), x2, x)
     return x
 
 
-def _solve(rows: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Solve the weighted normal equations of the inhomogeneous DLT system per joint."""
-    m = np.einsum('kcjri,kcjrl,kcj->kjil', rows, rows, w)          # [K, J, 4, 4]
-    nviews = (w > 0).sum(axis=1)                                     # [K, J]
-    a = m[..., :3, :3]
-    b = -m[..., :3, 3]
-    det = np.linalg.det(a)
-    scale = np.einsum('...ii->...', a) ** 3 + 1e-300
-    ok = (nviews >= 2) & (np.abs(det) > 1e-12 * scale)
-    a = np.where(ok[..., None, None], a, np.eye(3))
-    x = np.linalg.solve(a, b[..., None])[..., 0]
-    x[~ok] = np.nan
-    return x
+def _depth(x: np.ndarray, projections: np.ndarray) -> np.ndarray:
+    """Return the ``[C, K, J]`` depth of points ``x [3, K, J]`` in every camera."""
+    k, j = x.shape[1:]
+    return (projections[:, 2, :3] @ x.reshape(3, k * j)).reshape(len(projections), k, j) \
+        + projections[:, 2, 3, None, None]
 
 
-def reproject(joints: np.ndarray, projections: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Project ``[K, J, 3]`` world points into all cameras: ``(uv [K, C, J, 2], depth)``."""
-    cam = np.einsum('cab,kjb->kcja', projections[:, :, :3], joints) \
-        + projections[None, :, None, :, 3]
-    depth = cam[..., 2]
+def reproject(x: np.ndarray, projections: np.ndarray
+              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project points ``x [3, K, J]`` into all cameras: ``(u, v, depth)``, each ``[C, K, J]``."""
+    k, j = x.shape[1:]
+    cam = (projections[:, :, :3] @ x.reshape(3, k * j)).reshape(len(projections), 3, k, j) \
+        + projections[:, :, 3, None, None]
     with np.errstate(divide='ignore', invalid='ignore'):
-        uv = cam[..., :2] / depth[..., None]
-    return uv, depth
+        inv = 1.0 / cam[:, 2]
+    return cam[:, 0] * inv, cam[:, 1] * inv, cam[:, 2]
 
 
 @dataclass
@@ -135,65 +177,66 @@ class Triangulation:
     """Result of ``triangulate_robust`` for K candidates (distances normalised unless _px)."""
 
     joints: np.ndarray        # [K, J, 3] metres, NaN where rejected
-    confidence: np.ndarray    # [K, J] weighted mean detector confidence of the used views
+    confidence: np.ndarray    # [K, J] mean detector confidence of the used views
     num_views: np.ndarray     # [K, J] views used
     error: np.ndarray         # [K, J] mean reprojection error of the used views, normalised
     error_px: np.ndarray      # [K, J] the same in pixels of each camera, NaN where rejected
-    used: np.ndarray          # [K, C, J] bool, views that contributed
+    used: np.ndarray          # [C, K, J] bool, views that contributed
+    gated: np.ndarray         # [K, J] bool, a view failed the reprojection gate (retried)
 
 
-def triangulate_robust(points: np.ndarray, weights: np.ndarray, projections: np.ndarray,
-                       focal_px: np.ndarray, gate: float = 0.03,
-                       min_views: int = 2) -> Triangulation:
+def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np.ndarray,
+                       focal_px: np.ndarray, gate: float = 0.03, min_views: int = 2,
+                       basis: Optional[np.ndarray] = None) -> Triangulation:
     """
     Triangulate with a reprojection gate and one retry without the worst view.
 
-    A joint whose largest reprojection error over its views exceeds ``gate`` (normalised
-    units) is triangulated again without that view if it has at least three; if it still
-    fails the gate, or has fewer than ``min_views`` views, or lies behind a camera that saw
-    it, it is rejected (NaN).
+    ``u, v, w [C, K, J]`` as in ``triangulate_dlt``. A joint whose largest reprojection error
+    over its views exceeds ``gate`` (normalised units) is triangulated again without that view
+    if it has at least three; if it still fails the gate, or has fewer than ``min_views``
+    views, or lies behind a camera that saw it, it is rejected (NaN).
     """
-    weights = np.where(np.isfinite(points).all(axis=-1), weights, 0.0)
-    x = triangulate_dlt(points, weights, projections)
-    err, depth = _errors(x, points, projections)
-    used = weights > 0
-    worst_err = np.where(used, err, -1.0)
-    worst = worst_err.max(axis=1)                                    # [K, J]
-    nviews = used.sum(axis=1)
-    retry = (worst > gate) & (nviews >= 3)
+    if basis is None:
+        basis = dlt_basis(projections)
+    used = (w > 0) & np.isfinite(u) & np.isfinite(v)
+    w = np.where(used, w, 0.0)
+    x = triangulate_dlt(u, v, w, projections, basis=basis)
+    err, depth = _errors(x, u, v, projections)
+    err_used = np.where(used, err, -1.0)
+    worst = err_used.max(axis=0)                                     # [K, J]
+    nviews = used.sum(axis=0)
+    gated = worst > gate
+    retry = gated & (nviews >= 3)
     if retry.any():
-        drop = (worst_err == worst[:, None, :]) & retry[:, None, :]
-        weights = np.where(drop, 0.0, weights)
-        sub = retry.any(axis=1)                                      # candidates to redo
-        x_sub = triangulate_dlt(points[sub], weights[sub], projections)
-        x[sub] = np.where(retry[sub][..., None], x_sub, x[sub])
-        err, depth = _errors(x, points, projections)
-        used = weights > 0
-        nviews = used.sum(axis=1)
+        drop = (err_used == worst) & retry
+        w = np.where(drop, 0.0, w)
+        used = used & ~drop
+        x = np.where(retry, triangulate_dlt(u, v, w, projections, basis=basis), x)
+        err, depth = _errors(x, u, v, projections)
+        err_used = np.where(used, err, -1.0)
+        nviews = used.sum(axis=0)
     with np.errstate(invalid='ignore'):
-        err_used = np.where(used, err, np.nan)
-        behind = (used & ~(depth > 0)).any(axis=1)
-        bad = (np.nanmax(np.where(used, err, -1.0), axis=1) > gate) | behind \
-            | (nviews < min_views) | ~np.isfinite(x).all(axis=-1)
-    x[bad] = np.nan
-    used &= ~bad[:, None, :]
-    nviews = used.sum(axis=1)
+        bad = (err_used.max(axis=0) > gate) | (used & ~(depth > 0)).any(axis=0) \
+            | (nviews < min_views) | np.isnan(x[0])
+    used = used & ~bad
+    nviews = np.where(bad, 0, nviews)
     with np.errstate(invalid='ignore', divide='ignore'):
-        conf = np.where(nviews > 0, np.where(used, weights, 0.0).sum(axis=1)
-                        / np.maximum(nviews, 1), 0.0)
-        err_mean = np.where(nviews > 0, np.nansum(np.where(used, err_used, 0.0), axis=1)
-                            / np.maximum(nviews, 1), np.nan)
-        err_px = np.where(used, err * focal_px[None, :, None], 0.0).sum(axis=1) \
-            / np.where(nviews > 0, nviews, np.nan)
-    return Triangulation(joints=x, confidence=conf, num_views=nviews, error=err_mean,
-                         error_px=err_px, used=used)
+        inv = np.where(bad, np.nan, 1.0 / nviews)
+        err_used = np.where(used, err, 0.0)
+        conf = np.where(bad, 0.0, np.where(used, w, 0.0).sum(axis=0) * inv)
+        err_mean = err_used.sum(axis=0) * inv
+        err_px = (err_used * focal_px[:, None, None]).sum(axis=0) * inv
+    joints = np.where(bad, np.nan, x).transpose(1, 2, 0)
+    return Triangulation(joints=joints, confidence=conf, num_views=nviews, error=err_mean,
+                         error_px=err_px, used=used, gated=gated)
 
 
-def _errors(x: np.ndarray, points: np.ndarray,
+def _errors(x: np.ndarray, u: np.ndarray, v: np.ndarray,
             projections: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    uv, depth = reproject(x, projections)
-    err = np.hypot(uv[..., 0] - points[..., 0], uv[..., 1] - points[..., 1])
-    return np.where(np.isfinite(err), err, np.inf), depth
+    """Return reprojection errors (inf where undefined) and depths, ``[C, K, J]`` each."""
+    pu, pv, depth = reproject(x, projections)
+    err = np.hypot(pu - u, pv - v)
+    return np.where(np.isnan(err), np.inf, err), depth
 
 
 def bone_outliers(joints: np.ndarray, bones: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -225,48 +268,47 @@ def bone_outliers(joints: np.ndarray, bones: np.ndarray, lo: np.ndarray, hi: np.
     return out
 
 
-def swapped_views(points: np.ndarray, weights: np.ndarray, tri: Triangulation,
+def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, tri: Triangulation,
                   projections: np.ndarray, flip_pairs: np.ndarray, gate: float,
                   ratio: float = 0.5) -> np.ndarray:
     """
     Find single views whose left/right labels of a joint pair are swapped.
 
-    The triangulation ``tri`` (made robust by the reprojection gate, so one
-    mislabelled view among three or more has been dropped) is projected into every view; a
-    view's pair ``(a, b)`` counts as swapped when its observations fit the projections of
-    ``(b, a)`` better by ``ratio`` while the given labels miss by more than ``gate``. Only
-    joints triangulated from at least two views besides the tested one are checked. Returns
-    ``[K, C, F]`` booleans (F = number of pairs).
+    The triangulation ``tri`` (made robust by the reprojection gate, so one mislabelled view
+    among three or more has been dropped) is projected into every view; a view's pair
+    ``(a, b)`` counts as swapped when its observations fit the projections of ``(b, a)``
+    better by ``ratio`` while the given labels miss by more than ``gate``. Only joints
+    triangulated from at least two views besides the tested one are checked. ``u, v, w`` are
+    ``[C, K, J]``; returns ``[C, K, F]`` booleans (F = number of pairs).
     """
     fp = np.asarray(flip_pairs, dtype=int).reshape(-1, 2)
-    num_k, num_c = weights.shape[:2]
+    num_c, num_k = w.shape[:2]
     if num_k == 0 or len(fp) == 0:
-        return np.zeros((num_k, num_c, len(fp)), dtype=bool)
+        return np.zeros((num_c, num_k, len(fp)), dtype=bool)
     la, lb = fp[:, 0], fp[:, 1]
-    uv, _ = reproject(tri.joints[:, np.concatenate((la, lb))], projections)  # [K, C, 2F, 2]
-    pa, pb = uv[:, :, :len(fp)], uv[:, :, len(fp):]
-    oa, ob = points[:, :, la], points[:, :, lb]
-
-    def d(p, o):
-        return np.hypot(p[..., 0] - o[..., 0], p[..., 1] - o[..., 1])
-
+    x = tri.joints.transpose(2, 0, 1)                                 # [3, K, J]
+    pu, pv, _ = reproject(x[:, :, np.concatenate((la, lb))], projections)
+    nf = len(fp)
+    pua, pva, pub, pvb = pu[..., :nf], pv[..., :nf], pu[..., nf:], pv[..., nf:]
+    ua, va, ub, vb = u[..., la], v[..., la], u[..., lb], v[..., lb]
     with np.errstate(invalid='ignore'):
-        same = d(pa, oa) + d(pb, ob)
-        cross = d(pa, ob) + d(pb, oa)
-        seen = (weights[:, :, la] > 0) & (weights[:, :, lb] > 0)
-        own = tri.used[:, :, la] | tri.used[:, :, lb]
-        others = np.minimum(tri.num_views[:, la], tri.num_views[:, lb])[:, None, :] \
-            - own.astype(int)
+        same = np.hypot(pua - ua, pva - va) + np.hypot(pub - ub, pvb - vb)
+        cross = np.hypot(pua - ub, pva - vb) + np.hypot(pub - ua, pvb - va)
+        seen = (w[..., la] > 0) & (w[..., lb] > 0)
+        own = tri.used[..., la] | tri.used[..., lb]
+        others = np.minimum(tri.num_views[:, la], tri.num_views[:, lb]) - own
         return seen & (others >= 2) & (same > 2 * gate) & (cross < ratio * same)
 
 
-def swap_pairs(points: np.ndarray, weights: np.ndarray, swapped: np.ndarray,
-               flip_pairs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Return copies of ``points [K, C, J, 2]`` and ``weights`` with swapped pairs exchanged."""
+def swap_pairs(u: np.ndarray, v: np.ndarray, w: np.ndarray, swapped: np.ndarray,
+               flip_pairs: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return copies of ``u, v, w [C, K, J]`` with the ``swapped [C, K, F]`` pairs exchanged."""
     fp = np.asarray(flip_pairs, dtype=int).reshape(-1, 2)
-    points, weights = points.copy(), weights.copy()
-    k, c, f = np.nonzero(swapped)
+    c, k, f = np.nonzero(swapped)
     a, b = fp[f, 0], fp[f, 1]
-    points[k, c, a], points[k, c, b] = points[k, c, b], points[k, c, a]
-    weights[k, c, a], weights[k, c, b] = weights[k, c, b], weights[k, c, a]
-    return points, weights
+    out = []
+    for arr in (u, v, w):
+        arr = arr.copy()
+        arr[c, k, a], arr[c, k, b] = arr[c, k, b], arr[c, k, a]
+        out.append(arr)
+    return out[0], out[1], out[2]
