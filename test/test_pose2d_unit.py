@@ -344,3 +344,27 @@ def test_frame_source_reads_folders_and_videos(tmp_path):
         FrameSource(str(tmp_path / 'missing'))
     with pytest.raises(ValueError, match='no images'):
         FrameSource(str(tmp_path))
+
+
+def test_image_cdr_is_read_in_place():
+    from builtin_interfaces.msg import Time
+    from mv3dpose_ros.ros.images import (image_to_numpy, ImageError, numpy_to_image,
+                                         parse_image_cdr)
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Header
+    rng = np.random.default_rng(3)
+    for shape, enc in (((7, 5, 3), 'rgb8'), ((3, 9), 'mono8')):
+        arr = rng.integers(0, 255, size=shape, dtype=np.uint8)
+        for frame_id in ('', 'a', 'ab', 'abc', 'cam0_optical_frame'):
+            msg = numpy_to_image(arr, Header(stamp=Time(sec=17, nanosec=99),
+                                             frame_id=frame_id), enc)
+            wire = serialize_message(msg)
+            parsed, data = parse_image_cdr(wire)
+            got, order = image_to_numpy(parsed, data)
+            assert parsed.header == msg.header and parsed.encoding == enc
+            assert np.array_equal(got, arr) and order == ('rgb' if enc == 'rgb8' else 'gray')
+            assert np.shares_memory(got, np.frombuffer(wire, np.uint8))     # no pixel copy
+    with pytest.raises(ImageError, match='declares'):
+        parse_image_cdr(wire[:-3])
+    with pytest.raises(ImageError, match='plain CDR'):
+        parse_image_cdr(b'\x00\x07\x00\x00' + wire[4:])

@@ -36,7 +36,7 @@ lifecycle node: the model loads in ``on_configure``, the subscription exists whi
 import math
 import threading
 import time
-from typing import Any, List, Optional
+from typing import Any, List, Optional, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
 from mv3dpose_ros.core.skeleton import get_layout
@@ -47,7 +47,7 @@ from mv3dpose_ros.pose2d.models import ModelNotFound, parse_size, resolve_model_
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
-from mv3dpose_ros.ros.images import image_to_numpy, ImageError, numpy_to_image
+from mv3dpose_ros.ros.images import image_to_numpy, ImageError, numpy_to_image, parse_image_cdr
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
@@ -55,6 +55,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
 # name -> (default, description, dynamic)
@@ -110,7 +111,7 @@ class Pose2DNode(LifecycleNode):
         self._diag: Optional[Diagnostics] = None
         self._worker: Optional[threading.Thread] = None
         self._cv = threading.Condition()
-        self._pending: Optional[Image] = None
+        self._pending: Union[Image, bytes, None] = None
         self._stop = False
         self._stats_lock = threading.Lock()
         self._reset_stats()
@@ -207,9 +208,11 @@ class Pose2DNode(LifecycleNode):
                                         daemon=True)
         self._worker.start()
         qos = sensor_qos(self._param('image_qos.reliability'), int(self._param('image_qos.depth')))
+        # raw=True: the pixels are read in place from the CDR bytes (parse_image_cdr).
         self._sub = self.create_subscription(Image, 'image', self._on_image, qos,
                                              event_callbacks=subscription_events(self, 'image',
-                                                                                 qos))
+                                                                                 qos),
+                                             raw=True)
         self.get_logger().info(
             f'{self.resolve_topic_name("image")} [{describe(qos)}] -> '
             f'{self.resolve_topic_name("persons_2d")} [{describe(reliable_qos())}]')
@@ -259,7 +262,7 @@ class Pose2DNode(LifecycleNode):
         super().destroy_node()
 
     # -- data path ------------------------------------------------------------------------------
-    def _on_image(self, msg: Image) -> None:
+    def _on_image(self, msg: Union[Image, bytes]) -> None:
         """Keep only the newest image; count the one it replaces as dropped."""
         now = self.get_clock().now().nanoseconds
         with self._cv:
@@ -286,9 +289,19 @@ class Pose2DNode(LifecycleNode):
                 self._rl('failed', f'camera {self.camera_id}: inference failed: {exc!r}',
                          self.get_clock().now().nanoseconds)
 
-    def process(self, msg: Image) -> Optional[Person2DArray]:
-        """Run the whole path on one image and publish; return the message (None if rejected)."""
+    def process(self, msg: Union[Image, bytes]) -> Optional[Person2DArray]:
+        """
+        Run the whole path on one image and publish; return the message (None if rejected).
+
+        ``msg`` is an ``Image`` or its serialised CDR bytes (what the raw subscription gets).
+        """
         t0 = time.perf_counter()
+        data = None
+        if isinstance(msg, (bytes, bytearray, memoryview)):
+            try:
+                msg, data = parse_image_cdr(msg)
+            except ImageError:          # not plain CDR: let rclpy decode it
+                msg = deserialize_message(bytes(msg), Image)
         now = self.get_clock().now().nanoseconds
         stamp = stamp_to_ns(msg.header.stamp)
         with self._stats_lock:
@@ -300,7 +313,7 @@ class Pose2DNode(LifecycleNode):
                      'with their capture time (fusion synchronises on it)', now)
             return None
         try:
-            image, order = image_to_numpy(msg)
+            image, order = image_to_numpy(msg, data)
         except ImageError as exc:
             self.rejected_encoding += 1
             self._rl('image', f'camera {self.camera_id}: image on '
