@@ -293,3 +293,27 @@ def test_real_model_on_panoptic_frames(ros_context, shared_data):
         for n in (pub, probe.node, node):
             ex.remove_node(n)
             n.destroy_node()
+
+
+def test_lifecycle_without_autostart(ros_context, tmp_path):
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from rclpy.lifecycle import TransitionCallbackReturn
+    ok = TransitionCallbackReturn.SUCCESS
+    model, _ = _crafted_model(tmp_path)
+    node = Pose2DNode(context=ros_context, parameter_overrides=[
+        Parameter('model.path', value=model), Parameter('autostart', value=False)])
+    try:
+        assert not node.active and node.estimator is None
+        assert node.trigger_configure() == ok and node.trigger_activate() == ok and node.active
+        assert node.trigger_deactivate() == ok and not node.active and node._worker is None
+        assert node.trigger_cleanup() == ok and node.estimator is None
+        assert node.trigger_configure() == ok and node.trigger_activate() == ok
+        assert node._worker.is_alive() and node.estimator is not None
+    finally:
+        node.destroy_node()
+    bad = Pose2DNode(context=ros_context, parameter_overrides=[
+        Parameter('model.path', value=str(tmp_path / 'none.onnx'))])
+    try:
+        assert not bad.active and 'model file not found' in bad.error
+    finally:
+        bad.destroy_node()
