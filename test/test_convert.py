@@ -149,12 +149,16 @@ def test_panoptic_demo_images(shared_data, tmp_path):
                             quiet=True)
     assert summary['frame_numbers'] == [4500, 5514, 6859, 9348, 13007]
     with BagReader(out) as reader:
+        # '00_03' is no valid ROS name token: the camera lives under /cam00_03
+        assert sorted(reader.topics()) == ['/cam00_03/camera_info', '/cam00_03/image_raw',
+                                           '/cam00_23/camera_info', '/cam00_23/image_raw']
         stamps = {}
-        for topic, t, msg in reader.decoded(['/00_03/image_raw', '/00_23/image_raw']):
+        for topic, t, msg in reader.decoded(['/cam00_03/image_raw', '/cam00_23/image_raw']):
             stamps.setdefault(topic, []).append(t)
             assert (msg.width, msg.height) == (1920, 1080)
-    assert stamps['/00_03/image_raw'] == stamps['/00_23/image_raw']
-    assert np.allclose(np.diff(stamps['/00_03/image_raw']), 0.5e9)
+            assert msg.header.frame_id in ('00_03', '00_23')
+    assert stamps['/cam00_03/image_raw'] == stamps['/cam00_23/image_raw']
+    assert np.allclose(np.diff(stamps['/cam00_03/image_raw']), 0.5e9)
 
 
 def test_pose2sim_openpose_to_bag(shared_data, tmp_path):

@@ -311,13 +311,14 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
          start_offset: float = 0.0, clock: bool = True, wait_for_subscribers: float = 0.0,
          delay: float = 0.0, quiet: bool = False, context=None, stop=None,
          pace_topics: Optional[Sequence[str]] = None, pace_timeout: float = 30.0,
-         on_publish=None) -> int:
+         on_publish=None, wait_topics: Optional[Sequence[str]] = None) -> int:
     """
     Publish the messages of the bag at ``path``; return how many were published.
 
     ``rate`` scales the pace (2 = twice as fast, 0 = as fast as possible); ``start_offset``
     skips the first seconds; ``wait_for_subscribers`` waits up to that many seconds until every
-    played topic has a subscriber (nothing is lost to discovery); ``stop`` is an optional
+    played topic (or each of ``wait_topics``) has a subscriber (nothing is lost to
+    discovery); ``stop`` is an optional
     callable polled between messages. ``pace_topics``: after each time point (the messages
     sharing one bag timestamp), wait until every pace topic delivered one more message (at
     most ``pace_timeout`` s), so slow nodes that keep only the newest input lose nothing.
@@ -369,8 +370,8 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
             if pacer is not None:
                 deadline = time.monotonic() + max(wait_for_subscribers, pace_timeout)
             while time.monotonic() < deadline and not stopped():
-                subscribed = (wait_for_subscribers <= 0 or
-                              all(p.get_subscription_count() > 0 for p in pubs.values()))
+                subscribed = (wait_for_subscribers <= 0 or all(
+                    pubs[t].get_subscription_count() > 0 for t in (wait_topics or pubs)))
                 paced = pacer is None or pacer.subscribe_ready()
                 if subscribed and paced:
                     break

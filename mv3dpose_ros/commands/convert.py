@@ -27,7 +27,8 @@ tracks    a tracks bag (TrackedSkeletonArray) -> tracks JSON Lines of ``mv3dpose
 
 Camera names come from the calibration; folder names are matched to them (exactly, else
 loosely: Pose2Sim's ``cam01_json`` is ``cam_01``). A folder without a calibrated camera, or a
-requested camera without a folder, is an error naming both sides.
+requested camera without a folder, is an error naming both sides. ``<cam>`` in topic names is
+the camera name, or ``cam<name>`` when the name is no valid ROS name token (``00_03``).
 """
 
 import argparse
@@ -49,25 +50,38 @@ TRACKS_TOPIC = '/mv3dpose/tracks'
 TRACKS_TYPE = 'mv3dpose_msgs/msg/TrackedSkeletonArray'
 PERSONS_TYPE = 'mv3dpose_msgs/msg/Person2DArray'
 _DIGITS = re.compile(r'(\d+)')
+_VALID_TOKEN = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 
 class ConvertError(ValueError):
     """Input that cannot be converted; the text names the file or folder and the reason."""
 
 
+def camera_namespace(camera: str) -> str:
+    """
+    Return the ROS namespace token of a camera: its name, or ``cam<name>`` if that is invalid.
+
+    ROS name tokens must start with a letter (Panoptic's ``00_03`` cannot), so such cameras
+    live under ``/cam00_03/...``; fusion_node then needs ``input_topic:=/cam{camera}/...``.
+    """
+    if _VALID_TOKEN.match(camera) and '__' not in camera:
+        return camera
+    return 'cam' + re.sub(r'[^A-Za-z0-9_]', '_', camera)
+
+
 def image_topic(camera: str) -> str:
     """Return the image topic of ``camera``."""
-    return f'/{camera}/image_raw'
+    return f'/{camera_namespace(camera)}/image_raw'
 
 
 def info_topic(camera: str) -> str:
     """Return the CameraInfo topic of ``camera``."""
-    return f'/{camera}/camera_info'
+    return f'/{camera_namespace(camera)}/camera_info'
 
 
 def persons_topic(camera: str) -> str:
     """Return the Person2DArray topic of ``camera``."""
-    return f'/{camera}/persons_2d'
+    return f'/{camera_namespace(camera)}/persons_2d'
 
 
 def stamp_ns(start_time: float, index: float, fps: float) -> int:

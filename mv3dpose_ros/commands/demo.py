@@ -147,6 +147,16 @@ def _write_params(path: Path, sections: Dict[str, dict]) -> str:
     return str(path)
 
 
+def input_topic_pattern(cameras: Sequence[str]) -> str:
+    """Return fusion_node's ``input_topic`` for the namespaces ``persons_topic`` gives."""
+    from mv3dpose_ros.commands.convert import camera_namespace
+    prefixed = {camera_namespace(c) != c for c in cameras}
+    if len(prefixed) > 1:
+        raise DemoError(f'cameras {", ".join(cameras)}: mix names that are valid ROS names '
+                        'with names that are not (digit first); rename them in the calibration')
+    return '/cam{camera}/persons_2d' if prefixed.pop() else '/{camera}/persons_2d'
+
+
 def _fusion_cmd(params: str) -> List[str]:
     return ['fusion_node', '--ros-args', '--params-file', config_file('fusion.yaml'),
             '--params-file', params]
@@ -219,6 +229,10 @@ def latency_ms(frames: Sequence[dict], published: Dict[int, int]) -> np.ndarray:
     return np.asarray(lat, dtype=float)
 
 
+def _span_s(published: Dict[int, int]) -> float:
+    return (max(published.values()) - min(published.values())) * 1e-9 if published else 0.0
+
+
 def _stats(values) -> str:
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
@@ -279,7 +293,7 @@ def run_synthetic(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     try:
         params = _write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': str(rig), 'camera_ids': cams,
-            'layout': scene.layout}})
+            'layout': scene.layout, 'input_topic': input_topic_pattern(cams)}})
         pipeline.start('fusion_node', _fusion_cmd(params))
         pipeline.start('recorder', _recorder_cmd(output_bag,
                                                  [TRACKS_TOPIC, MARKERS_TOPIC, INFO_TOPIC]))
@@ -298,8 +312,8 @@ def run_synthetic(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     finally:
         pipeline.stop_all()
     frames = read_output(output_bag)
-    _say(f'played:    {n} messages in {play_s:.1f} s; recorded {len(frames)} tracks messages '
-         f'in {output_bag}')
+    _say(f'played:    {n} messages in {_span_s(published):.1f} s ({play_s:.1f} s with '
+         f'discovery); recorded {len(frames)} tracks messages in {output_bag}')
     if not frames:
         raise DemoError('no tracks were recorded; fusion_node log:\n'
                         + pipeline.tail('fusion_node'))
@@ -373,8 +387,8 @@ def ensure_model(name: str) -> str:
 
 def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     """Run image folders -> image bag -> player -> pose2d_node x N -> fusion_node -> recorder."""
-    from mv3dpose_ros.commands.convert import camera_sources, images_to_bag, load_cameras
-    from mv3dpose_ros.commands.convert import persons_topic
+    from mv3dpose_ros.commands.convert import camera_namespace, camera_sources, image_topic
+    from mv3dpose_ros.commands.convert import images_to_bag, load_cameras, persons_topic
     from mv3dpose_ros.pose2d.models import read_sidecar
 
     folder = args.images
@@ -397,20 +411,24 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     output_bag = run_dir / 'output_bag'
     pose_topics = [persons_topic(c) for c in cams]
     try:
-        pose_params = _write_params(run_dir / 'pose2d_params.yaml', {'/**/pose2d_node': {
-            'use_sim_time': True, 'model': {'name': args.model, 'path': model, 'threads': 1},
-            'image_qos': {'reliability': 'reliable', 'depth': 5}, 'debug_image': False}})
         for cam in cams:
-            pipeline.start(f'pose2d_{cam}', [
-                'pose2d_node', '--ros-args', '-r', f'__ns:=/{cam}', '-r', 'image:=image_raw',
+            ns = camera_namespace(cam)
+            # a node-specific section (after the shipped file) wins over its '/**' defaults
+            pose_params = _write_params(run_dir / f'pose2d_{ns}.yaml', {f'/{ns}/pose2d_node': {
+                'use_sim_time': True, 'camera_id': cam,
+                'model': {'name': args.model, 'path': model, 'threads': 1},
+                'image_qos': {'reliability': 'reliable', 'depth': 5}, 'debug_image': False}})
+            pipeline.start(f'pose2d_{ns}', [
+                'pose2d_node', '--ros-args', '-r', f'__ns:=/{ns}', '-r', 'image:=image_raw',
                 '--params-file', config_file('pose2d.yaml'), '--params-file', pose_params])
         params = _write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': os.path.abspath(calibration),
-            'camera_ids': cams, 'layout': layout, 'publish_tentative': True}})
+            'camera_ids': cams, 'layout': layout, 'publish_tentative': True,
+            'input_topic': input_topic_pattern(cams)}})
         pipeline.start('fusion_node', _fusion_cmd(params))
         pipeline.start('recorder', _recorder_cmd(
             output_bag, [TRACKS_TOPIC, MARKERS_TOPIC, INFO_TOPIC] + pose_topics))
-        _wait_for_nodes(ctx, pipeline, pose_topics + [f'/{c}/image_raw' for c in cams],
+        _wait_for_nodes(ctx, pipeline, pose_topics + [image_topic(c) for c in cams],
                         args.timeout, published=pose_topics)
         _say(f'nodes:     {len(cams)} x pose2d_node, fusion_node, recorder up; the player '
              'waits for every node after each time point')
@@ -418,7 +436,7 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
         t0 = time.monotonic()
         n = _player(input_bag, ctx, published, args.quiet, rate=0.0,
                     wait_for_subscribers=args.timeout, pace_topics=pose_topics + [TRACKS_TOPIC],
-                    pace_timeout=args.timeout)
+                    pace_timeout=args.timeout, wait_topics=[image_topic(c) for c in cams])
         play_s = time.monotonic() - t0
         time.sleep(1.0)
         pipeline.check()
@@ -427,8 +445,8 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     finally:
         pipeline.stop_all()
     frames = read_output(output_bag)
-    _say(f'played:    {n} messages in {play_s:.1f} s; recorded {len(frames)} tracks messages '
-         f'in {output_bag}')
+    _say(f'played:    {n} messages in {_span_s(published):.1f} s ({play_s:.1f} s with '
+         f'discovery); recorded {len(frames)} tracks messages in {output_bag}')
     if not frames:
         raise DemoError('no tracks were recorded; fusion_node log:\n'
                         + pipeline.tail('fusion_node'))

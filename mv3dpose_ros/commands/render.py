@@ -32,9 +32,10 @@ import cv2
 from mv3dpose_ros.core.types import JointState, TrackState
 import numpy as np
 
-# Distinct colours (BGR), Tableau-10 order; a track keeps its colour for its whole life.
+# Distinct colours (BGR), Tableau-10 order with navy for its grey (visible on grey images);
+# a track keeps its colour for its whole life.
 PALETTE = [(180, 119, 31), (14, 127, 255), (44, 160, 44), (40, 39, 214), (189, 103, 148),
-           (75, 86, 140), (194, 119, 227), (127, 127, 127), (34, 189, 188), (207, 190, 23)]
+           (75, 86, 140), (194, 119, 227), (110, 30, 20), (34, 189, 188), (207, 190, 23)]
 BACKGROUND = (250, 250, 250)
 GRID = (225, 225, 225)
 AXIS_TEXT = (110, 110, 110)
@@ -323,7 +324,9 @@ class Renderer:
         stamp = ('' if frame.stamp is None or self.t0 is None
                  else f'   t = {frame.stamp - self.t0:.2f} s')
         text = f'{title}   ' if title else ''
-        cv2.putText(bar, f'{text}frame {frame.frame}{stamp}   {len(live)} tracked',
+        coasting = sum(1 for t in live if t.state == TrackState.COASTING)
+        count = f'{len(live) - coasting} tracked' + (f', {coasting} coasting' if coasting else '')
+        cv2.putText(bar, f'{text}frame {frame.frame}{stamp}   {count}',
                     (10, 26), FONT, 0.6, (30, 30, 30), 1, cv2.LINE_AA)
         x = views.shape[1] - 10
         for t in reversed(live):
