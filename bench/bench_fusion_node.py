@@ -64,8 +64,10 @@ def cpu_seconds(pid: int) -> float:
 
 def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0) -> dict:
     frames = int(seconds * rate)
+    warmup = int(3 * rate)             # at most 3 s until the first output (discovery)
     radius = 6.0 if people <= 8 else 9.0
-    scene = make_scene(num_cameras=cams, num_people=people, num_frames=frames, fps=rate,
+    scene = make_scene(num_cameras=cams, num_people=people, num_frames=warmup + frames,
+                       fps=rate,
                        seed=seed, rig=RigConfig(num_cameras=cams, radius_m=radius),
                        walk=WalkConfig(area_radius_m=radius * 0.5))
     tmp = tempfile.mkdtemp(prefix='bench_fusion_node_')
@@ -107,20 +109,40 @@ def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0) -> d
         msgs = [{c: numpy_to_person2d_array(v, Header(frame_id=c), c, scene.cameras[c].width,
                                             scene.cameras[c].height, scene.layout)
                  for c, v in views.items()} for views in scene.views]
-        cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
         period = 1.0 / rate
-        next_t = time.monotonic()
-        for f in range(frames):
+
+        def send(f: int) -> None:
             stamp = ns_to_stamp(time.time_ns())
             for c, m in msgs[f].items():
                 m.header.stamp = stamp
                 pubs[c].publish(m)
-            next_t += period
+
+        def wait_until(t: float) -> None:
             while True:
-                left = next_t - time.monotonic()
+                left = t - time.monotonic()
                 if left <= 0:
-                    break
+                    return
                 ex.spin_once(timeout_sec=min(left, 0.005))
+
+        # Warm-up: stream until the first output arrived (all endpoints matched).
+        next_t = time.monotonic()
+        first = 0
+        while not e2e and first < warmup:
+            send(first)
+            first += 1
+            next_t += period
+            wait_until(next_t)
+        if not e2e:
+            raise RuntimeError(f'no output within {warmup} warm-up frames:\n'
+                               + open(log.name).read())
+        e2e.clear()
+        tracks.clear()
+        cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
+        next_t = time.monotonic()
+        for f in range(first, first + frames):
+            send(f)
+            next_t += period
+            wait_until(next_t)
         end = time.monotonic() + 2.0
         while time.monotonic() < end and len(e2e) < frames:
             ex.spin_once(timeout_sec=0.02)

@@ -35,15 +35,18 @@ from mv3dpose_ros.core.fusion import Fusion
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.mot import evaluate_mot
 from mv3dpose_ros.eval.mpjpe import mpjpe
+from mv3dpose_ros.ros.images import camera_info_from_camera
 from mv3dpose_ros.ros.messages import (msg_to_tracks, ns_to_stamp, numpy_to_person2d_array,
                                        person2d_array_to_numpy, stamp_to_ns)
-from mv3dpose_ros.ros.qos import latched_qos, reliable_qos
+from mv3dpose_ros.ros.qos import latched_qos, reliable_qos, sensor_qos
 from mv3dpose_ros.sim import make_scene
 import numpy as np
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 import yaml
 
@@ -423,3 +426,62 @@ def test_bad_configuration_fails_fast_with_clear_error(rig_path, tmp_path):
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert res.returncode == 2
     assert "camera_ids ['cam_99'] are not in" in res.stderr + res.stdout
+
+
+def test_use_sim_time_stamps_latency_and_clock_jump(harness_factory, scene):
+    """Under use_sim_time "now" is /clock: latency and diagnostics use it; a jump back resets."""
+    h = harness_factory(use_sim_time=True)
+    clock_pub = h.probe.create_publisher(Clock, '/clock', 10)
+    t0 = 1000 * NS                     # a bag recorded long ago: stamps far from wall time
+    for cam, msg, f in stream(scene, t0, range(20)):
+        clock_pub.publish(Clock(clock=ns_to_stamp(t0 + f * NS // 30 + 5_000_000)))
+        h.publish(cam, msg)
+    assert h.wait_sets(19)
+    assert h.node.get_clock().now().nanoseconds // NS == 1000
+    # Latency = sim now - capture stamp: a few ms of sim time, not decades of wall time.
+    assert 0.0 <= h.node.latency.percentile(50) < 0.05
+    assert all(st.rejected == {} for st in h.node.cams.values())
+    h.diags.clear()
+    # Node timers run on sim time: /diagnostics comes while /clock advances (0.2 s period).
+    for k in range(1, 30):
+        clock_pub.publish(Clock(clock=ns_to_stamp(t0 + NS + k * 50_000_000)))
+        if h.spin_until(lambda: h.diags, 0.1):
+            break
+    assert h.diags and stamp_to_ns(h.diags[-1].header.stamp) // NS == 1001
+    assert h.node.counts['resets'] == 0
+    clock_pub.publish(Clock(clock=ns_to_stamp(t0 - 10 * NS)))     # bag loop: /clock goes back
+    assert h.spin_until(lambda: h.node.counts['resets'] == 1, 5.0)
+    assert h.node.sync.last_emitted_ns is None
+    for cam, msg, _ in stream(scene, t0 - 10 * NS, range(10)):
+        h.publish(cam, msg)
+    assert h.wait_sets(29)
+
+
+def test_intrinsics_from_camera_info_validated(harness_factory, scene):
+    h = harness_factory(intrinsics_source='camera_info')
+    assert h.node.fusion is None
+    info_pubs = {c: h.probe.create_publisher(CameraInfo, f'/{c}/camera_info',
+                                             sensor_qos('reliable', 1))
+                 for c in scene.cameras}
+    assert h.spin_until(lambda: all(p.get_subscription_count() for p in info_pubs.values()))
+    t0 = base_ns(40)
+    for cam, msg, _ in stream(scene, t0, range(2)):
+        h.publish(cam, msg)
+    assert h.spin_until(lambda: h.node.cams['cam_01'].rejected['no_calibration'] == 2)
+    zero = camera_info_from_camera(scene.cameras['cam_02'])
+    zero.k = [0.0] * 9
+    info_pubs['cam_02'].publish(zero)
+    assert h.spin_until(lambda: h.node.cams['cam_02'].info_problem, 5.0)
+    assert "camera 'cam_02'" in h.node.cams['cam_02'].info_problem
+    assert "field 'CameraInfo.k'" in h.node.cams['cam_02'].info_problem
+    h.diags.clear()
+    assert h.spin_until(lambda: h.latest_status('calibration') is not None, 3.0)
+    status = h.latest_status('calibration')
+    assert status.level == b'\x02' and 'cam_02' in status.message
+    for cam, c in scene.cameras.items():
+        info_pubs[cam].publish(camera_info_from_camera(c))
+    assert h.spin_until(lambda: h.node.fusion is not None, 5.0)
+    assert h.node.cams['cam_02'].info_problem == ''
+    for cam, msg, _ in stream(scene, t0, range(2, 12)):
+        h.publish(cam, msg)
+    assert h.wait_sets(9)

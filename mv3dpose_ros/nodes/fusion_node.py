@@ -81,8 +81,14 @@ class _Camera:
         self.freq = FrequencyStats()
         self.stamps = TimestampStats()
         self.last_rx_ns: Optional[int] = None
-        self.calibration_problem = ''          # '' when the messages agree with calibration
+        self.size_problem = ''                 # last message's size disagreed with calibration
+        self.info_problem = ''                 # the CameraInfo was rejected
         self.camera_info_received = False
+
+    @property
+    def calibration_problem(self) -> str:
+        """Return what disagrees with the calibration ('' when nothing)."""
+        return '; '.join(p for p in (self.info_problem, self.size_problem) if p)
 
 
 class FusionNode(Node):
@@ -347,7 +353,7 @@ class FusionNode(Node):
             try:
                 camera = camera_from_info(self.rig[cam], msg)
             except (CalibrationError, ValueError) as exc:
-                state.calibration_problem = f'CameraInfo rejected: {exc}'
+                state.info_problem = f'CameraInfo rejected: {exc}'
                 self._rlog(f'{cam}:camera_info', f'camera {cam}: CameraInfo on '
                            f'{self.resolve_topic_name(self.camera_info_topic.format(camera=cam))}'
                            f' rejected: {exc}', self._now_ns())
@@ -359,7 +365,7 @@ class FusionNode(Node):
                     f'from the rig file ({rig_cam.width}x{rig_cam.height}); using CameraInfo')
             self.rig[cam] = camera
             state.camera_info_received = True
-            state.calibration_problem = ''
+            state.info_problem = ''
             if all(self.cams[c].camera_info_received for c in self.camera_ids):
                 self._build_fusion()
                 self.get_logger().info('intrinsics of every camera received: fusing')
@@ -395,8 +401,9 @@ class FusionNode(Node):
             problem = (f'image_width x image_height {msg.image_width}x{msg.image_height} '
                        f'differs from the calibration {calib.width}x{calib.height} '
                        f'({self.rig_path})')
-            state.calibration_problem = problem
+            state.size_problem = problem
             return None, ('image_size', problem)
+        state.size_problem = ''
         layout_name = msg.layout or self.layout.name
         try:
             src = get_layout(layout_name)
@@ -442,7 +449,7 @@ class FusionNode(Node):
                 return
             result = self.sync.add(cam, stamp_ns, poses)
             if result.reset:
-                self._reset(result.reason)
+                self._reset(result.reason, from_sync=True)
             if not result.accepted:
                 self._reject(state, 'late', result.reason, now)
                 return
@@ -465,11 +472,11 @@ class FusionNode(Node):
         with self._lock:
             self._reset(f'node clock jumped back {-jump.delta.nanoseconds / NS_PER_S:.3f} s')
 
-    def _reset(self, why: str) -> None:
+    def _reset(self, why: str, from_sync: bool = False) -> None:
         """Clear synchroniser and tracks; publish tombstones of the published tracks."""
         self.counts['resets'] += 1
         self.get_logger().warning(f'reset: {why}; synchroniser and tracks cleared')
-        if self.sync.pending():
+        if not from_sync:
             self.sync.reset()
         tombs = self.fusion.reset() if self.fusion is not None else []
         tombs = [t for t in tombs if t.track_id in self._published_ids]
