@@ -196,8 +196,8 @@ def test_tracks_match_simulation_with_jitter_reordering_and_drops(harness_factor
         events[i:i + 6] = window
     for cam, msg, _ in events:
         h.publish(cam, msg)
-    assert h.spin_until(lambda: h.node.sync.pending() == 0 and h.node.counts['sets'] >= 80,
-                        timeout=15.0)
+    assert h.spin_until(lambda: h.node.sync.pending() == 0 and h.node.counts['sets'] >= 80 and
+                        len(h.tracks) >= h.node.counts['sets'], timeout=15.0)
     assert h.infos and h.infos[0].layout == 'coco17' and len(h.infos[0].joint_names) == 17
     frames = published_frames(h.tracks)
     gt_frames, pm = [], []
@@ -261,7 +261,8 @@ def test_backward_time_jump_resets_without_crash(harness_factory, scene):
     # The "bag" loops: frames 0.. again, 2 s earlier than what was already seen.
     for cam, msg, _ in stream(scene, t0, range(30)):
         h.publish(cam, msg)
-    assert h.spin_until(lambda: h.node.counts['resets'] >= 1 and h.node.counts['sets'] >= 58)
+    assert h.spin_until(lambda: h.node.counts['resets'] >= 1 and h.node.counts['sets'] >= 59
+                        and len(h.tracks) >= h.node.counts['sets'] + 1)   # + tombstones
     assert h.node.counts['resets'] == 1
     after = h.tracks[n_before:]
     tombstones = [t for m in after for t in m.skeletons if t.state == TrackState.DELETED]
@@ -314,7 +315,7 @@ def test_bad_inputs_dropped_counted_and_tracking_continues(harness_factory, scen
     t0 = base_ns(60)
     for cam, msg, _ in stream(scene, t0, range(20)):
         h.publish(cam, msg)
-    assert h.wait_sets(19)
+    assert h.wait_sets(20)                      # 20 complete frames: 20 sets
     state = h.node.fusion.tracker
     cam = 'cam_03'
     last_ns = h.node.sync.last_emitted_ns
@@ -443,11 +444,14 @@ def test_use_sim_time_stamps_latency_and_clock_jump(harness_factory, scene):
     assert all(st.rejected == {} for st in h.node.cams.values())
     h.diags.clear()
     # Node timers run on sim time: /diagnostics comes while /clock advances (0.2 s period).
+    def late_diag():
+        return [d for d in h.diags if stamp_to_ns(d.header.stamp) >= t0 + NS]
+
     for k in range(1, 30):
         clock_pub.publish(Clock(clock=ns_to_stamp(t0 + NS + k * 50_000_000)))
-        if h.spin_until(lambda: h.diags, 0.1):
+        if h.spin_until(late_diag, 0.1):
             break
-    assert h.diags and stamp_to_ns(h.diags[-1].header.stamp) // NS == 1001
+    assert late_diag() and stamp_to_ns(late_diag()[0].header.stamp) // NS == 1001
     assert h.node.counts['resets'] == 0
     clock_pub.publish(Clock(clock=ns_to_stamp(t0 - 10 * NS)))     # bag loop: /clock goes back
     assert h.spin_until(lambda: h.node.counts['resets'] == 1, 5.0)
