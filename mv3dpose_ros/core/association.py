@@ -31,7 +31,7 @@ number of valid matches, then minimises their total cost); any number of cameras
 views and poses with missing joints (even all of them) are handled.
 """
 
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -61,7 +61,8 @@ def quadratic_monomials(x: np.ndarray) -> np.ndarray:
 
 
 def symmetric_epipolar_distance(x_new: np.ndarray, x_ref: np.ndarray, essentials: np.ndarray,
-                                q_new: np.ndarray = None, coef: np.ndarray = None
+                                q_new: Optional[np.ndarray] = None,
+                                coef: Optional[np.ndarray] = None
                                 ) -> Tuple[np.ndarray, np.ndarray]:
     """
     Sum and count the symmetric point-to-epipolar-line distances of pose pairs.
@@ -87,6 +88,30 @@ def symmetric_epipolar_distance(x_new: np.ndarray, x_ref: np.ndarray, essentials
         dist = algebraic * (inv_new[:, None, :] + inv_ref)
     ok = np.isfinite(dist)
     return 0.5 * np.where(ok, dist, 0.0).sum(axis=0), ok.sum(axis=0)
+
+
+def camera_order(axes: np.ndarray) -> np.ndarray:
+    """
+    Return an order of cameras for the association: wide angles between consecutive cameras.
+
+    ``axes [C, 3]`` are the optical axes in the world (``R[2]``). Starting with camera 0, each
+    next camera maximises the smallest ``|sin|`` of its angle to the cameras already taken.
+    Neighbours on a ring (small baseline) are ambiguous along their epipolar lines, and an
+    early wrong pairing would seed a ghost candidate; views about 90 degrees apart pair
+    reliably, so they go first.
+    """
+    axes = np.asarray(axes, dtype=float)
+    axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    sines = np.linalg.norm(np.cross(axes[:, None], axes[None]), axis=-1)   # [C, C]
+    order = [0]
+    best = sines[0].copy()
+    best[0] = -1.0
+    for _ in range(len(axes) - 1):
+        nxt = int(np.argmax(best))
+        order.append(nxt)
+        best = np.minimum(best, sines[nxt])
+        best[order] = -1.0
+    return np.array(order, dtype=int)
 
 
 def associate(points: Sequence[np.ndarray], visible: Sequence[np.ndarray],
@@ -122,7 +147,8 @@ def associate(points: Sequence[np.ndarray], visible: Sequence[np.ndarray],
 def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray,
                       threshold: float = 0.02, min_joints: int = 3,
                       max_reference_views: int = 4, min_views: int = 2,
-                      norm_coefficients: np.ndarray = None) -> np.ndarray:
+                      norm_coefficients: Optional[np.ndarray] = None,
+                      order: Optional[Sequence[int]] = None) -> np.ndarray:
     """
     Group stacked 2D poses into person candidates (paper, Algorithm 1).
 
@@ -137,7 +163,8 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     solve, so they never block a valid alternative. Unmatched poses start new candidates.
     Returns ``[K, C]`` global pose indices (-1 = not seen) of the candidates seen by at least
     ``min_views`` cameras. ``norm_coefficients`` is
-    ``epipolar_norm_coefficients(essentials)`` if precomputed.
+    ``epipolar_norm_coefficients(essentials)`` if precomputed; ``order`` is the sequence in
+    which cameras are added (default: index order; see ``camera_order``).
     """
     num_n = len(x)
     num_c = len(offsets) - 1
@@ -152,7 +179,7 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     ref_cand: list = []
     nref: list = []
     num_k = 0
-    for cam in range(num_c):
+    for cam in (range(num_c) if order is None else order):
         lo, hi = int(offsets[cam]), int(offsets[cam + 1])
         if hi == lo:
             continue
@@ -168,7 +195,7 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
             count = (usable * dcnt) @ onehot
             with np.errstate(invalid='ignore', divide='ignore'):
                 cost = total / count                         # NaN where no usable view
-            rows, cols = _gated_assignment(cost, threshold)
+            rows, cols = gated_assignment(cost, threshold)
             members[cols, cam] = lo + rows
             matched[rows] = True
             for r, k in zip(rows.tolist(), cols.tolist()):
@@ -186,10 +213,17 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     return members[(members >= 0).sum(axis=1) >= min_views]
 
 
-def _gated_assignment(cost: np.ndarray, threshold: float) -> Tuple[np.ndarray, np.ndarray]:
-    """Solve the assignment after removing pairs at or over ``threshold`` (re-solving vetoes)."""
+def gated_assignment(cost: np.ndarray, threshold) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Match rows to columns by the Hungarian algorithm over the pairs with ``cost < threshold``.
+
+    Pairs at or over the threshold (scalar or broadcastable array; NaN costs never pass) are
+    removed before the solve, not vetoed after it, so an invalid pair never blocks a valid
+    alternative: the solve maximises the number of valid matches, then minimises their cost.
+    Returns ``(rows, cols)`` of the accepted pairs.
+    """
     with np.errstate(invalid='ignore'):
-        feasible = cost < threshold                          # NaN -> infeasible
+        feasible = cost < threshold
     if not feasible.any():
         return np.empty(0, dtype=int), np.empty(0, dtype=int)
     rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))

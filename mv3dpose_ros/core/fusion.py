@@ -30,7 +30,8 @@ from dataclasses import asdict, dataclass
 import logging
 from typing import Dict, List, Mapping, Optional, Set, Tuple
 
-from mv3dpose_ros.core.association import associate_stacked, epipolar_norm_coefficients
+from mv3dpose_ros.core.association import (associate_stacked, camera_order,
+                                           epipolar_norm_coefficients)
 from mv3dpose_ros.core.camera import Camera, essential_matrix
 from mv3dpose_ros.core.skeleton import get_layout, Layout
 from mv3dpose_ros.core.smoothing import CausalFilter
@@ -68,6 +69,7 @@ class FusionConfig:
     # tracking (paper: tau)
     tracking_gate_m: float = 0.2            # mean joint distance to continue a track
     tracking_gate_growth_mps: float = 1.0   # gate widening per second since last observed
+    tracking_recovery_gate_m: float = 0.5   # second-chance gate before starting a new track
     tracking_prediction: bool = True        # constant-velocity prediction of the root
     confirm_hits: int = 3                   # observations before a track is CONFIRMED
     max_coast_s: float = 1.0                # unobserved time before a track is DELETED
@@ -75,6 +77,7 @@ class FusionConfig:
     min_birth_cameras_in_view: int = 3      # cameras whose image must contain a new track's
     #                                         centroid (capped at cameras - 1): no tracks are
     #                                         started outside the rig's shared working volume
+    min_birth_view_ratio: float = 0.5       # a new track's views / cameras that should see it
     # causal smoothing
     smoothing: str = 'causal'               # 'causal' (alpha-beta per joint) or 'none'
     smoothing_alpha: float = 0.6            # position gain per update (1 = no smoothing)
@@ -87,7 +90,8 @@ class FusionConfig:
         positive = ('epipolar_threshold_norm', 'reprojection_gate_norm', 'tracking_gate_m',
                     'smoothing_alpha', 'smoothing_reset_m')
         non_negative = ('min_joint_confidence', 'swap_ratio', 'merge_distance_m',
-                        'tracking_gate_growth_mps', 'max_coast_s', 'smoothing_beta',
+                        'min_birth_view_ratio', 'tracking_gate_growth_mps',
+                        'tracking_recovery_gate_m', 'max_coast_s', 'smoothing_beta',
                         'max_gap_s')
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
                         'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
@@ -138,6 +142,7 @@ class Fusion:
                 if a != b:
                     self._essentials[a, b] = essential_matrix(self.cameras[a], self.cameras[b])
         self._norm_coef = epipolar_norm_coefficients(self._essentials)
+        self._order = camera_order(np.array([c.R[2] for c in self.cameras]))
         self._projections = np.stack([np.hstack([c.R, c.t[:, None]]) for c in self.cameras])
         self._basis = dlt_basis(self._projections)
         self._focal = np.array([c.focal for c in self.cameras])
@@ -158,6 +163,7 @@ class Fusion:
         cfg = self.config
         self.tracker = Tracker(lay.num_joints, TrackerConfig(
             gate_m=cfg.tracking_gate_m, gate_growth_mps=cfg.tracking_gate_growth_mps,
+            recovery_gate_m=cfg.tracking_recovery_gate_m,
             min_shared_joints=cfg.min_shared_joints, predict=cfg.tracking_prediction,
             confirm_hits=cfg.confirm_hits, max_coast_s=cfg.max_coast_s,
             min_birth_joints=cfg.min_birth_joints))
@@ -168,6 +174,9 @@ class Fusion:
         self._confidence = np.zeros((0, num_j))           # last observed confidence per track
         #: 3D poses ``[K, J, 3]`` triangulated in the last step, before tracking.
         self.last_poses = np.empty((0, num_j, 3))
+        #: ``[K, C]`` index of the input 2D pose (in ``views[camera]``) behind each of
+        #: ``last_poses`` per camera (rig order), -1 where a camera did not contribute.
+        self.last_members = np.zeros((0, len(self.cameras)), dtype=int)
         #: Figures of the last step (counts, median reprojection error in px).
         self.last_info: Dict[str, float] = {}
 
@@ -207,8 +216,11 @@ class Fusion:
         self._last_stamp = stamp
         tri, members = self._reconstruct(views)
         self.last_poses = tri.joints
-        upd = self.tracker.update(tri.joints, stamp,
-                                  self.cameras_in_view(tri.joints) >= self._birth_views)
+        in_view = self.cameras_in_view(tri.joints)
+        views = (members >= 0).sum(axis=1)
+        birth = (in_view >= self._birth_views) \
+            & (views >= self.config.min_birth_view_ratio * in_view)
+        upd = self.tracker.update(tri.joints, stamp, birth)
         return self._outputs(upd.detection, upd.previous, tri, members, stamp) + tombs \
             + self._tombstones(upd.deleted)
 
@@ -261,15 +273,18 @@ class Fusion:
             counts.append(n)
         counts = np.array(counts)
         if not arrays:
+            self._source = np.array([-1])
             return np.zeros((0, num_j, 3)), np.zeros((0, num_j)), np.zeros(len(counts) + 1, int)
         a = np.concatenate(arrays, axis=0) if len(arrays) > 1 else arrays[0]
         with np.errstate(invalid='ignore'):
             vis = (a[..., 2] >= cfg.min_joint_confidence) & np.isfinite(a).all(axis=-1)
         keep = vis.sum(axis=1) >= cfg.min_pose_joints
         cam_of = np.repeat(np.arange(len(counts)), counts)
+        source = np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
         if not keep.all():
-            a, vis, cam_of = a[keep], vis[keep], cam_of[keep]
+            a, vis, cam_of, source = a[keep], vis[keep], cam_of[keep], source[keep]
             counts = np.bincount(cam_of, minlength=len(counts))
+        self._source = np.concatenate((source, [-1]))
         offsets = np.concatenate(([0], np.cumsum(counts)))
         k = self._k[cam_of][:, None, :]                                     # [N, 1, 5]
         y = (a[..., 1] - k[..., 4]) / k[..., 3]
@@ -293,7 +308,8 @@ class Fusion:
                                     min_joints=cfg.min_shared_joints,
                                     max_reference_views=cfg.max_reference_views,
                                     min_views=cfg.min_views,
-                                    norm_coefficients=self._norm_coef)
+                                    norm_coefficients=self._norm_coef,
+                                    order=self._order)
         info = {'poses_2d': int(offsets[-1]),
                 'views_with_poses': int((np.diff(offsets) > 0).sum()),
                 'candidates': len(members)}
@@ -310,6 +326,7 @@ class Fusion:
                 tri, members, gidx, swaps = self._triangulate(u_all, v_all, w_all, members,
                                                               gidx)
         info.update(swapped_pairs=swaps, merged=merged, poses_3d=len(members))
+        self.last_members = np.where(members >= 0, self._source[gidx], -1)
         err = tri.error_px[np.isfinite(tri.error_px)]
         info['reprojection_error_px'] = float(np.median(err)) if err.size else float('nan')
         self.last_info = info

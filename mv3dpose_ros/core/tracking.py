@@ -21,7 +21,9 @@ Each set of 3D poses is matched to the live tracks by a gated Hungarian solve. T
 on the ground plane (x, y; world z is up). A pair is accepted below the gate
 ``gate_m + gate_growth_mps * (time since the track was last observed)``: the paper's
 tau = 0.2 m between consecutive frames, widened for tracks that were not seen for a while and
-for low frame rates. With ``predict`` each track is first moved by its velocity (constant
+for low frame rates. Tracks and poses left over are matched once more with the wider
+``recovery_gate_m`` before new tracks start, so one noisy pose does not fork a track. With
+``predict`` each track is first moved by its velocity (constant
 velocity of the whole body, estimated from the joints seen in consecutive observations), so
 walking people stay inside the gate at low frame rates.
 
@@ -35,11 +37,11 @@ operations whatever the number of people.
 """
 
 from dataclasses import dataclass, fields
-from typing import Optional, Tuple
+from typing import Optional
 
+from mv3dpose_ros.core.association import gated_assignment
 from mv3dpose_ros.core.types import TrackState
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 
 @dataclass
@@ -54,6 +56,7 @@ class TrackerConfig:
     max_coast_s: float = 1.0
     min_birth_joints: int = 6
     velocity_smoothing: float = 0.5     # weight of the old velocity in its running average
+    recovery_gate_m: float = 0.5        # second-pass gate for tracks and poses left unmatched
 
 
 @dataclass
@@ -131,16 +134,6 @@ def pose_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int = 3) -> n
     return np.where(np.isfinite(mean), mean, np.inf)
 
 
-def gated_assignment(cost: np.ndarray, gate) -> Tuple[np.ndarray, np.ndarray]:
-    """Hungarian matching of the pairs with ``cost < gate`` only (others never block)."""
-    feasible = cost < gate
-    if not feasible.any():
-        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
-    rows, cols = linear_sum_assignment(np.where(feasible, cost, 1e9))
-    keep = feasible[rows, cols]
-    return rows[keep], cols[keep]
-
-
 class Tracker:
     """Assign 3D poses to tracks over time and run their life cycle."""
 
@@ -176,6 +169,15 @@ class Tracker:
             gate = cfg.gate_m + cfg.gate_growth_mps * np.maximum(stamp - tr.last_observed, 0.0)
             rows, cols = gated_assignment(cost, gate[:, None])
             det[rows] = cols
+            if cfg.recovery_gate_m > 0:
+                # Second chance for the leftovers with a wider gate, before new tracks are
+                # started: one noisy 3D pose should not fork a person's track.
+                free_t = np.nonzero(det < 0)[0]
+                free_d = np.setdiff1d(np.arange(num_d), cols)
+                if len(free_t) and len(free_d):
+                    r2, c2 = gated_assignment(cost[np.ix_(free_t, free_d)],
+                                              np.maximum(gate[free_t, None], cfg.recovery_gate_m))
+                    det[free_t[r2]] = free_d[c2]
         hit = det >= 0
         if hit.any():
             self._observe(hit, poses[det[hit]], stamp)
