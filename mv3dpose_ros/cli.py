@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The ``mv3dpose`` command: offline tracking, evaluation, models, bags, rendering, the demo.
+"""
+The ``mv3dpose`` command: offline tracking, evaluation, models, bags, rendering, the demo.
 
 Each subcommand lives in ``mv3dpose_ros.commands.<name>`` and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``; modules are imported only when their

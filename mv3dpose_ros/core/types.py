@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Data types shared by the fusion core, the ROS adapters and the offline tools.
+"""
+Data types shared by the fusion core, the ROS adapters and the offline tools.
 
 Conventions: 2D poses are ``[P, J, 3]`` arrays of (x px, y px, confidence) in raw (distorted)
 image pixels; 3D joints are metres in the world frame (z up) with NaN where a joint is missing.
@@ -65,10 +66,10 @@ class Track:
 
     @property
     def num_joints(self) -> int:
-        """Number of joints of the layout."""
+        """Return the number of joints of the layout."""
         return int(self.joints.shape[0])
 
     @property
     def valid(self) -> np.ndarray:
-        """Boolean mask ``[J]`` of joints with a usable position."""
+        """Return the boolean mask ``[J]`` of joints with a usable position."""
         return self.joint_state != JointState.MISSING
