@@ -48,6 +48,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
 import yaml
 
 pytestmark = [pytest.mark.ros]
@@ -84,7 +85,7 @@ def person_msg(scene, cam, poses, stamp_ns):
 class Harness:
     """A FusionNode and a probe node (publishers per camera, output subscribers)."""
 
-    def __init__(self, scene, rig_path, **params):
+    def __init__(self, scene, rig_path, markers=False, **params):
         from mv3dpose_ros.nodes.fusion_node import FusionNode
         self.scene = scene
         self.ctx = rclpy.Context()
@@ -105,6 +106,10 @@ class Harness:
                                        reliable_qos(50))
         self.probe.create_subscription(SkeletonInfo, '/fusion_node/skeleton_info',
                                        self.infos.append, latched_qos())
+        self.markers = []
+        if markers:
+            self.probe.create_subscription(MarkerArray, '/fusion_node/markers',
+                                           self.markers.append, reliable_qos(500))
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         self.executor.add_node(self.probe)
@@ -152,8 +157,8 @@ class Harness:
 def harness_factory(scene, rig_path):
     made = []
 
-    def make(**params):
-        h = Harness(scene, rig_path, **params)
+    def make(markers=False, **params):
+        h = Harness(scene, rig_path, markers, **params)
         made.append(h)
         return h
 
@@ -184,7 +189,7 @@ def stream(scene, t0, frames, drop=0.0, jitter_ns=0, seed=0, skip=None):
 
 
 def test_tracks_match_simulation_with_jitter_reordering_and_drops(harness_factory, scene):
-    h = harness_factory()
+    h = harness_factory(markers=True)
     t0 = base_ns(scene.num_frames)
     events = list(stream(scene, t0, range(scene.num_frames), drop=0.05, jitter_ns=4_000_000,
                          seed=3))
@@ -222,6 +227,13 @@ def test_tracks_match_simulation_with_jitter_reordering_and_drops(harness_factor
     assert mot.id_switches <= 1
     assert err.mpjpe_m <= 0.040
     assert h.node.counts['partial_sets'] > 0
+    # Markers (published because subscribed): DELETEALL first, confirmed tracks drawn.
+    assert h.spin_until(lambda: len(h.markers) >= 10, 5.0)
+    last = h.markers[-1].markers
+    assert last[0].action == Marker.DELETEALL and last[0].ns
+    bones = [m for m in last if m.ns.endswith('bones') and m.action == Marker.ADD]
+    assert len(bones) == len(frames[max(frames)]) and all(m.header.frame_id == 'map'
+                                                          for m in last)
     assert h.node.sync.stats['cam_01'].received > 0
     assert sum(st.rejected['late'] for st in h.node.cams.values()) <= 2
 
@@ -489,3 +501,23 @@ def test_intrinsics_from_camera_info_validated(harness_factory, scene):
     for cam, msg, _ in stream(scene, t0, range(2, 12)):
         h.publish(cam, msg)
     assert h.wait_sets(9)
+
+
+def test_dynamic_parameters_apply_and_topology_is_read_only(harness_factory, scene):
+    h = harness_factory()
+    t0 = base_ns(30)
+    for cam, msg, _ in stream(scene, t0, range(1)):
+        h.publish(cam, msg)
+    assert h.wait_sets(1)
+    assert len(h.tracks[-1].skeletons) == 0    # new (tentative) tracks are not published
+    res = h.node.set_parameters([Parameter('publish_tentative', value=True)])
+    assert res[0].successful
+    res = h.node.set_parameters([Parameter('rig_config', value='/elsewhere.yaml')])
+    assert not res[0].successful
+    res = h.node.set_parameters([Parameter('markers.lifetime_s', value=-1.0)])
+    assert not res[0].successful and 'markers.lifetime_s' in res[0].reason
+    for cam, msg, _ in stream(scene, t0, range(1, 2)):
+        h.publish(cam, msg)
+    assert h.wait_sets(2)
+    assert {s.state for s in h.tracks[-1].skeletons} == {TrackState.TENTATIVE}
+    assert len(h.tracks[-1].skeletons) == scene.num_people

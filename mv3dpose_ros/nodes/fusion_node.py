@@ -150,6 +150,7 @@ class FusionNode(Node):
                           on_clock_change=False),
             post_callback=self._on_time_jump)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
         self.get_logger().info(
             f'fusing {len(self.camera_ids)} cameras {list(self.camera_ids)} from '
             f'{self.rig_path} (layout {self.layout.name}, world frame {self.world_frame!r}, '
@@ -313,9 +314,13 @@ class FusionNode(Node):
                         not math.isfinite(float(p.value)) or float(p.value) < 0):
                     return SetParametersResult(successful=False,
                                                reason=f'{p.name} must be finite and >= 0')
-        # Values are applied after the callback accepted them.
-        self._pending_dynamic = True
         return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, changes: List[Parameter]) -> None:
+        with self._lock:
+            self._read_dynamic()
+            self.get_logger().info('parameters changed: ' + ', '.join(
+                f'{p.name}={p.value!r}' for p in changes))
 
     def _topic(self, pattern: str, cam: str, param: str) -> str:
         """Return ``pattern`` for camera ``cam``; ConfigError if it is no valid topic name."""
@@ -516,9 +521,6 @@ class FusionNode(Node):
         self._last_set_ns = synced.stamp_ns
 
     def _publish(self, tracks: List[Track], stamp_ns: int) -> None:
-        if getattr(self, '_pending_dynamic', False):
-            self._pending_dynamic = False
-            self._read_dynamic()
         header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)
         self.tracks_pub.publish(tracks_to_msg(tracks, header, self.layout.name))
         self.output_rate.tick()
