@@ -122,7 +122,9 @@ class _Inner:
 class _Outer:
     threshold_m: float = 0.2     # gate in metres
     count: int = 3
-    enabled: bool = True
+    enabled: bool = True         # a comment that goes
+    #                              on over two lines
+    # a section comment, not a continuation
     mode: str = 'x'
     inner: _Inner = field(default_factory=_Inner)
     skipped: List[dict] = field(default_factory=list)
@@ -135,6 +137,7 @@ def test_dataclass_parameters_from_comments():
     assert rows['cfg.threshold_m']['description'] == 'gate in metres'
     assert rows['cfg.inner.gain']['default'] == 2.0 and rows['cfg.inner.gain']['type'] is float
     assert rows['cfg.count']['description'] == 'count'
+    assert rows['cfg.enabled']['description'] == 'a comment that goes on over two lines'
     sync = {r['name'] for r in P.dataclass_parameters(SyncConfig, 'sync')}
     assert 'sync.slop_s' in sync
 

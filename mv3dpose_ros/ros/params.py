@@ -68,23 +68,34 @@ def value(node: Any, name: str, default: Any = None) -> Any:
 
 
 def field_comments(cls: type) -> Dict[str, str]:
-    """Return ``{field: trailing comment}`` from the source of a dataclass (empty if absent)."""
+    """
+    Return ``{field: trailing comment}`` from the source of a dataclass (empty if absent).
+
+    A comment continues on the following comment-only lines whose text is indented by two or
+    more spaces after the ``#`` (aligned under the first line), as in ``core.fusion``.
+    """
     try:
         source = inspect.getsource(cls)
     except (OSError, TypeError):
         return {}
     out: Dict[str, str] = {}
-    pending: Optional[str] = None
     line_of_field: Dict[int, str] = {}
-    for lineno, line in enumerate(source.splitlines(), 1):
+    lines = source.splitlines()
+    for lineno, line in enumerate(lines, 1):
         m = re.match(r'\s+([A-Za-z_]\w*)\s*:[^=]*=', line)
         if m:
             line_of_field[lineno] = m.group(1)
     try:
         for tok in tokenize.generate_tokens(io.StringIO(source).readline):
             if tok.type == tokenize.COMMENT and tok.start[0] in line_of_field:
-                pending = tok.string.lstrip('#').strip()
-                out[line_of_field[tok.start[0]]] = pending
+                name = line_of_field[tok.start[0]]
+                text = tok.string.lstrip('#').strip()
+                for follow in lines[tok.start[0]:]:
+                    m = re.match(r'^\s*#\s{2,}(\S.*)$', follow)
+                    if not m:
+                        break
+                    text += ' ' + m.group(1).strip()
+                out[name] = text
     except (tokenize.TokenError, IndentationError):
         pass
     return out
