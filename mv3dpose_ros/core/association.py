@@ -133,10 +133,12 @@ def associate(points: Sequence[np.ndarray], visible: Sequence[np.ndarray],
     num_j = next((np.shape(p)[1] for p in points if len(p)), 0)
     xs = []
     for p, v in zip(points, visible):
-        p = np.asarray(p, dtype=float).reshape(len(p), num_j, -1)
+        p = np.asarray(p, dtype=float)
+        if p.size == 0:
+            continue
         if p.shape[-1] == 2:
             p = np.concatenate((p, np.ones(p.shape[:-1] + (1,))), axis=-1)
-        xs.append(np.where(np.asarray(v, dtype=bool).reshape(len(p), num_j)[..., None], p,
+        xs.append(np.where(np.asarray(v, dtype=bool).reshape(p.shape[:2])[..., None], p,
                            np.nan))
     x = np.concatenate(xs, axis=0) if xs else np.zeros((0, num_j, 3))
     members = associate_stacked(x, offsets, essentials, threshold, min_joints,

@@ -337,18 +337,21 @@ class Fusion:
         cfg = self.config
         g = gidx.T                                                       # [C, K]
         u, v, w = u_all[g], v_all[g], w_all[g]                           # [C, K, J]
-        gate = cfg.reprojection_gate_norm
-        tri = triangulate_robust(u, v, w, self._projections, self._focal, gate,
-                                 cfg.min_views, self._basis)
         swaps = 0
-        if cfg.swap_check and len(self._flip_pairs) and tri.gated.any():
-            sw = swapped_views(u, v, w, tri, self._projections, self._flip_pairs, gate,
-                               cfg.swap_ratio)
+        if cfg.swap_check and len(self._flip_pairs) and len(members):
+            # references: each candidate's first views in association order
+            has = members[:, self._order] >= 0                           # [K, C]
+            rank = np.where(has, np.arange(len(self._order)), len(self._order))
+            first = np.sort(rank, axis=1)[:, :cfg.max_reference_views + 1]
+            ref = np.where(first < len(self._order),
+                           self._order[np.minimum(first, len(self._order) - 1)], -1)
+            sw = swapped_views(u, v, w, self._essentials, self._flip_pairs, cfg.swap_ratio,
+                               ref_cams=ref.T)
             if sw.any():
                 swaps = int(sw.sum())
                 u, v, w = swap_pairs(u, v, w, sw, self._flip_pairs)
-                tri = triangulate_robust(u, v, w, self._projections, self._focal, gate,
-                                         cfg.min_views, self._basis)
+        tri = triangulate_robust(u, v, w, self._projections, self._focal,
+                                 cfg.reprojection_gate_norm, cfg.min_views, self._basis)
         if cfg.bone_check and len(members):
             bad = bone_outliers(tri.joints, self._bones, self._bone_lo, self._bone_hi,
                                 tri.error)

@@ -268,36 +268,66 @@ def bone_outliers(joints: np.ndarray, bones: np.ndarray, lo: np.ndarray, hi: np.
     return out
 
 
-def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, tri: Triangulation,
-                  projections: np.ndarray, flip_pairs: np.ndarray, gate: float,
-                  ratio: float = 0.5) -> np.ndarray:
+def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.ndarray,
+                  flip_pairs: np.ndarray, ratio: float = 0.5, min_distance: float = 0.0,
+                  ref_cams: Optional[np.ndarray] = None) -> np.ndarray:
     """
     Find single views whose left/right labels of a joint pair are swapped.
 
-    The triangulation ``tri`` (made robust by the reprojection gate, so one mislabelled view
-    among three or more has been dropped) is projected into every view; a view's pair
-    ``(a, b)`` counts as swapped when its observations fit the projections of ``(b, a)``
-    better by ``ratio`` while the given labels miss by more than ``gate``. Only joints
-    triangulated from at least two views besides the tested one are checked. ``u, v, w`` are
-    ``[C, K, J]``; returns ``[C, K, F]`` booleans (F = number of pairs).
+    Works in 2D, view against view, so a mislabelled view cannot contaminate the test (a
+    triangulation would be pulled towards it). For every candidate, joint pair ``(a, b)``, view
+    ``p`` and reference view ``r`` of it, the symmetric epipolar distances of the labels as
+    given, ``d(a_p, a_r) + d(b_p, b_r)``, are compared with the crossed ones,
+    ``d(a_p, b_r) + d(b_p, a_r)``. A view is swapped when the crossed labels fit better by
+    ``ratio`` (and the given ones miss by more than ``min_distance``) against a strict
+    majority, and at least two, of the references it is compared with: one swapped view among
+    three or more disagrees with all others, while the others disagree only with it.
+    ``u, v, w [C, K, J]`` are camera-major normalised points and weights, ``essentials``
+    ``[C, C, 3, 3]`` with ``x_b^T E[a, b] x_a = 0``; ``ref_cams [R, K]`` are the reference
+    cameras of each candidate (-1 = none; default every camera), a few of which keep the cost
+    linear in the number of cameras. Returns ``[C, K, F]`` booleans.
     """
     fp = np.asarray(flip_pairs, dtype=int).reshape(-1, 2)
     num_c, num_k = w.shape[:2]
-    if num_k == 0 or len(fp) == 0:
-        return np.zeros((num_c, num_k, len(fp)), dtype=bool)
-    la, lb = fp[:, 0], fp[:, 1]
-    x = tri.joints.transpose(2, 0, 1)                                 # [3, K, J]
-    pu, pv, _ = reproject(x[:, :, np.concatenate((la, lb))], projections)
     nf = len(fp)
-    pua, pva, pub, pvb = pu[..., :nf], pv[..., :nf], pu[..., nf:], pv[..., nf:]
-    ua, va, ub, vb = u[..., la], v[..., la], u[..., lb], v[..., lb]
-    with np.errstate(invalid='ignore'):
-        same = np.hypot(pua - ua, pva - va) + np.hypot(pub - ub, pvb - vb)
-        cross = np.hypot(pua - ub, pva - vb) + np.hypot(pub - ua, pvb - va)
-        seen = (w[..., la] > 0) & (w[..., lb] > 0)
-        own = tri.used[..., la] | tri.used[..., lb]
-        others = np.minimum(tri.num_views[:, la], tri.num_views[:, lb]) - own
-        return seen & (others >= 2) & (same > 2 * gate) & (cross < ratio * same)
+    out = np.zeros((num_c, num_k, nf), dtype=bool)
+    if num_k == 0 or nf == 0 or num_c < 3:
+        return out
+    if ref_cams is None:
+        ref_cams = np.repeat(np.arange(num_c)[:, None], num_k, axis=1)
+    num_r = len(ref_cams)
+    idx = np.concatenate((fp[:, 0], fp[:, 1]))                          # a joints, b joints
+    seen = (w[:, :, idx] > 0).reshape(num_c, num_k, 2, nf)
+    both = seen[:, :, 0] & seen[:, :, 1]                                 # [C, K, F]
+    if (both.sum(axis=0) < 3).all():
+        return out
+    x = np.stack([u[:, :, idx], v[:, :, idx], np.ones((num_c, num_k, 2 * nf))], axis=-1)
+    rc = np.maximum(ref_cams, 0)
+    kk = np.arange(num_k)[None, :]
+    xr = x[rc, kk][None]                                                 # [1, R, K, 2F, 3]
+    xp = x[:, None]                                                      # [C, 1, K, 2F, 3]
+    e = essentials[rc[None, :, :], np.arange(num_c)[:, None, None]]      # [C, R, K, 3, 3]
+    lines_p = xr @ np.swapaxes(e, -1, -2)            # in view p, of the reference points
+    lines_r = xp @ e                                 # in the reference view, of p's points
+    shape = (num_c, num_r, num_k, 2, nf)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        inv_p = (1.0 / np.hypot(lines_p[..., 0], lines_p[..., 1])).reshape(shape)
+        inv_r = (1.0 / np.hypot(lines_r[..., 0], lines_r[..., 1])).reshape(shape)
+        lp = lines_p.reshape(shape + (3,))
+        xpp = xp.reshape((num_c, 1, num_k, 2, nf, 3))
+        # |x_p(label i)^T E x_r(label j)| for all label pairs: [C, R, K, i, j, F]
+        alg = np.abs((xpp[:, :, :, :, None] * lp[:, :, :, None]).sum(axis=-1))
+        d_same = alg[:, :, :, 0, 0] * (inv_p[:, :, :, 0] + inv_r[:, :, :, 0]) \
+            + alg[:, :, :, 1, 1] * (inv_p[:, :, :, 1] + inv_r[:, :, :, 1])
+        d_cross = alg[:, :, :, 0, 1] * (inv_p[:, :, :, 1] + inv_r[:, :, :, 0]) \
+            + alg[:, :, :, 1, 0] * (inv_p[:, :, :, 0] + inv_r[:, :, :, 1])
+        pair = (ref_cams[None] >= 0) & (ref_cams[None] != np.arange(num_c)[:, None, None])
+        valid = both[:, None] & both[rc, kk][None] & pair[..., None] \
+            & np.isfinite(d_same) & np.isfinite(d_cross)
+        better = valid & (d_cross < ratio * d_same) & (0.5 * d_same > min_distance)
+    n_ok = valid.sum(axis=1)
+    n_better = better.sum(axis=1)
+    return (n_better >= 2) & (2 * n_better > n_ok)
 
 
 def swap_pairs(u: np.ndarray, v: np.ndarray, w: np.ndarray, swapped: np.ndarray,
