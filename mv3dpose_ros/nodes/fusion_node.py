@@ -25,6 +25,7 @@ diagnostics, so it can neither stop the node nor reach the tracker.
 """
 
 from collections import Counter
+import logging
 import math
 import os
 import sys
@@ -91,6 +92,24 @@ class _Camera:
         return '; '.join(p for p in (self.info_problem, self.size_problem) if p)
 
 
+class _RosLogHandler(logging.Handler):
+    """Forward the core's Python ``logging`` records to the node's ROS logger."""
+
+    def __init__(self, node: Node) -> None:
+        super().__init__(logging.INFO)
+        self._node = node
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logger = self._node.get_logger()
+        text = f'{record.name}: {record.getMessage()}'
+        if record.levelno >= logging.ERROR:
+            logger.error(text)
+        elif record.levelno >= logging.WARNING:
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+
 class FusionNode(Node):
     """ROS adapter of ``core.fusion.Fusion`` fed by the N-stream synchroniser."""
 
@@ -100,6 +119,8 @@ class FusionNode(Node):
         self._declare_parameters()
         self._read_parameters()
         self._rlog = RateLimitedLog(self.get_logger().warning, self.log_throttle_s)
+        self._log_handler = _RosLogHandler(self)
+        logging.getLogger('mv3dpose_ros').addHandler(self._log_handler)
 
         self.tracks_pub = self._publisher(TrackedSkeletonArray, '~/tracks', reliable_qos(10))
         self.markers_pub = self._publisher(MarkerArray, '~/markers', reliable_qos(5))
@@ -528,6 +549,11 @@ class FusionNode(Node):
         if self.markers_enabled and self.markers_pub.get_subscription_count() > 0:
             self.markers_pub.publish(tracks_to_markers(tracks, self.layout.bones, header,
                                                        self.marker_options))
+
+    def destroy_node(self) -> None:
+        """Detach the logging bridge, then destroy the node."""
+        logging.getLogger('mv3dpose_ros').removeHandler(self._log_handler)
+        super().destroy_node()
 
     # ------------------------------------------------------------------ diagnostics
     def _diag_inputs(self) -> List[Any]:
