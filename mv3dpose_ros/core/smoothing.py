@@ -98,7 +98,7 @@ class CausalFilter:
             second = obs & ~start & (self.count == 1) & (dt > 0)
             steady = obs & ~start & ~second
             gap = ~obs & live
-            hold = gap & (stamp - self.last_seen <= self.max_gap_s)
+            hold = gap & (stamp - self.last_seen <= self.max_gap_s + 1e-9)
             x = np.where((start | second)[..., None], z,
                          np.where(steady[..., None], pred + self.alpha * resid,
                                   np.where(hold[..., None], pred, np.nan)))

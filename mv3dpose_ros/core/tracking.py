@@ -182,7 +182,7 @@ class Tracker:
         if hit.any():
             self._observe(hit, poses[det[hit]], stamp)
         coast = ~hit & (tr.state != TrackState.TENTATIVE) \
-            & (stamp - tr.last_observed <= cfg.max_coast_s)
+            & (stamp - tr.last_observed <= cfg.max_coast_s + 1e-9)
         keep = hit | coast
         tr.missed = np.where(hit, 0, tr.missed + 1)
         tr.state = np.where(coast, np.int8(TrackState.COASTING), tr.state).astype(np.int8)
