@@ -23,15 +23,15 @@ J = 10
 
 
 def _pose(x, y, rng=None):
-    """A person-shaped blob of J joints standing at (x, y)."""
+    """Return a person-shaped blob of J joints standing at (x, y)."""
     base = np.stack([np.zeros(J), np.zeros(J), np.linspace(0.1, 1.7, J)], axis=1)
     base[:, 0] += np.linspace(-0.2, 0.2, J)
     return base + np.array([x, y, 0.0])
 
 
 def _states(tracker):
-    return {int(i): TrackState(int(s)).name for i, s in zip(tracker.tracks.ids,
-                                                             tracker.tracks.state)}
+    tracks = tracker.tracks
+    return {int(i): TrackState(int(s)).name for i, s in zip(tracks.ids, tracks.state)}
 
 
 def test_pose_distance_mean_and_ground_fallback():
