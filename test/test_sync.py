@@ -248,3 +248,11 @@ def test_bad_inputs_raise_clear_errors():
         sync.add('cam0', 0, None)
     with pytest.raises(ValueError, match='duplicate'):
         StreamSynchronizer(['a', 'a'])
+
+
+def test_min_views_one_expires_on_the_only_live_camera():
+    sync = make(min_views=1)
+    feed(sync, [('cam0', T0), ('cam1', T0), ('cam2', T0)])
+    out = feed(sync, [('cam0', T0 + f * PERIOD) for f in range(1, 8)])
+    assert [s.stamp_ns for s in out][:3] == [T0 + PERIOD, T0 + 2 * PERIOD, T0 + 3 * PERIOD]
+    assert all(s.missing == ('cam1', 'cam2') for s in out)

@@ -25,8 +25,9 @@ time), so replaying a bag at any rate gives the same sets:
 * A set is emitted as soon as every camera has contributed (complete), or, once the stream
   *horizon* has passed ``pivot + max_wait``, as a partial set when at least ``min_views``
   cameras contributed (otherwise the pivot's messages are dropped).
-* The horizon is the second-newest per-camera latest stamp (the newest with one camera), so a
-  single camera with a bogus future stamp cannot flush everybody's buffers.
+* The horizon is the second-newest per-camera latest stamp (the newest with one camera or
+  ``min_views`` 1), so a single camera with a bogus future stamp cannot flush everybody's
+  buffers, while a set that needs only one view can still expire.
 * A message whose stamp is not newer than ``pivot + slop`` of the last emitted (or dropped)
   pivot arrives too late for its set: it is dropped and counted as ``late``.
 * A camera whose own stamps jump backwards by more than ``backward_jump_s`` (bag loop, driver
@@ -230,7 +231,8 @@ class StreamSynchronizer:
                          if s.latest_stamp_ns is not None), reverse=True)
         if not latest:
             return None
-        return latest[1] if len(latest) >= 2 else latest[0]
+        k = min(len(latest), 2, self.config.min_views)
+        return latest[k - 1]
 
     def _candidates(self, pivot: int) -> Dict[str, int]:
         """Return camera -> index of its message nearest ``pivot`` within the slop window."""
