@@ -55,7 +55,7 @@ class FusionConfig:
     min_joint_confidence: float = 0.1       # keypoints below this count as missing
     min_pose_joints: int = 4                # 2D poses with fewer visible joints are ignored
     # association (paper: theta)
-    epipolar_threshold_norm: float = 0.02   # mean symmetric epipolar distance gate
+    epipolar_threshold_norm: float = 0.025  # mean symmetric epipolar distance gate
     min_shared_joints: int = 3              # joints two views must share for a valid cost
     max_reference_views: int = 4            # member views per candidate used in the cost
     min_views: int = 2                      # cameras a candidate needs to be triangulated
