@@ -1,0 +1,147 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+End to end over DDS: bag player -> nodes (separate processes) -> recorder, on real data.
+
+* the demo on its synthetic rig (what ``make demo`` runs), scored against the ground truth;
+* the full image pipeline on ../shared/data/panoptic_demo: image bag -> player ->
+  pose2d_node x 5 -> fusion_node -> recorder, 3 people at every time point;
+* the Pose2Sim OpenPose detections replayed as a bag through fusion_node give the tracks of
+  ``mv3dpose track`` on the JSON files.
+"""
+
+import json
+import os
+from pathlib import Path
+import subprocess
+import sys
+import time
+
+import cv2
+from mv3dpose_ros.commands.bag import play
+from mv3dpose_ros.commands.convert import bag_to_jsonl, openpose_to_bag, persons_topic
+from mv3dpose_ros.commands.demo import _recorder_cmd, _wait_for_nodes
+from mv3dpose_ros.commands.demo import _write_params, Pipeline, PLAUSIBLE_M, TRACKS_TOPIC
+from mv3dpose_ros.core.types import TrackState
+from mv3dpose_ros.io.tracks_jsonl import read_tracks
+import numpy as np
+import pytest
+
+CLI = [sys.executable, '-m', 'mv3dpose_ros.cli']
+
+
+def _demo(args, tmp_path, timeout):
+    out = tmp_path / 'demo'
+    proc = subprocess.run(CLI + ['demo', '-o', str(out), '-q', '--timeout', '90'] + args,
+                          capture_output=True, text=True, timeout=timeout)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    return out, summary, proc.stdout
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(240)
+def test_demo_on_the_synthetic_rig(tmp_path):
+    out, s, log = _demo(['--frames', '60', '--rate', '2', '--seed', '4'], tmp_path, 200)
+    assert s['mode'] == 'synthetic' and len(s['cameras']) == 4 and s['people'] == 3
+    assert s['frames_with_output'] == 60 and s['unknown_stamps'] == 0
+    assert s['tracks_found'] == 3 and s['id_switches'] == 0
+    assert s['mota'] > 0.9 and s['mpjpe_mm'] < 60
+    assert s['latency_ms']['median'] is not None
+    for key in ('MOTA', 'MPJPE', 'latency', 'picture'):
+        assert key in log
+    img = cv2.imread(s['picture'])
+    assert img is not None and img.shape[1] >= 1000
+    assert len(list(read_tracks(s['tracks_jsonl']))) == 60
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_panoptic_images_through_pose2d_and_fusion_nodes(shared_data, tmp_path):
+    from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
+    try:
+        resolve_model_path()
+    except ModelNotFound as exc:
+        pytest.skip(str(exc))
+    images = os.path.join(shared_data, 'panoptic_demo')
+    out, s, log = _demo(['--images', images], tmp_path, 560)
+    assert s['mode'] == 'images' and len(s['cameras']) == 5 and s['time_points'] == 5
+    # every synchronised set of the 5 time points: the 3 people of the scene
+    assert s['people_per_time_point'] == [3, 3, 3, 3, 3]
+    for bone, length in s['bone_length_m'].items():
+        lo, hi = PLAUSIBLE_M[bone]
+        assert lo <= length <= hi, f'{bone}: median {length:.3f} m outside [{lo}, {hi}]'
+    assert s['reprojection_error_px']['median'] < 20.0     # 1920x1080 images
+    img = cv2.imread(s['picture'])
+    assert img is not None and img.shape[0] > 900, 'no camera images in the picture'
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(300)
+def test_pose2sim_bag_replay_gives_the_tracks_of_mv3dpose_track(
+        shared_data, tmp_path, ros_context):
+    root = os.path.join(shared_data, 'pose2sim_multiperson')
+    calib = os.path.join(root, 'Calib_qualisys.toml')
+    fps, start = 60.0, 1000.0
+    expected = tmp_path / 'track.jsonl'
+    proc = subprocess.run(CLI + ['track', '--calibration', calib, '--poses',
+                                 os.path.join(root, 'pose'), '--layout', 'body25b', '--fps',
+                                 str(fps), '-o', str(expected), '--no-progress'],
+                          capture_output=True, text=True, timeout=200)
+    assert proc.returncode == 0, proc.stderr
+
+    bag = tmp_path / 'detections'
+    s = openpose_to_bag(os.path.join(root, 'pose'), calib, str(bag), 'body25b', fps=fps,
+                        start_time=start, quiet=True)
+    cams = s['cameras']
+    env = dict(os.environ)
+    pipeline = Pipeline(tmp_path, env)
+    recorded = tmp_path / 'tracks_bag'
+    try:
+        # no shipped fusion.yaml: the node runs FusionConfig's defaults, as `track` does
+        params = _write_params(tmp_path / 'fusion.yaml', {'/**/fusion_node': {
+            'use_sim_time': True, 'rig_config': calib, 'camera_ids': cams,
+            'layout': 'body25b', 'publish_tentative': True,
+            # 60 fps: the synchroniser's slop must stay below half a frame period
+            'sync': {'slop_s': 0.004}}})
+        pipeline.start('fusion_node', ['fusion_node', '--ros-args', '--params-file', params])
+        pipeline.start('recorder', _recorder_cmd(recorded, [TRACKS_TOPIC]))
+        _wait_for_nodes(ros_context, pipeline, [persons_topic(c) for c in cams], 60.0)
+        n = play(str(bag), rate=0.0, context=ros_context, quiet=True, wait_for_subscribers=60,
+                 pace_topics=[TRACKS_TOPIC], pace_timeout=5.0)
+        assert n == 400
+        time.sleep(1.0)
+        pipeline.check()
+        assert pipeline.stop('recorder') == 0, pipeline.tail('recorder')
+    finally:
+        pipeline.stop_all()
+    live = tmp_path / 'live.jsonl'
+    bag_to_jsonl(str(recorded), str(live), fps=fps, start_time=start)
+
+    a = {f.frame: f for f in read_tracks(str(expected))}
+    b = {f.frame: f for f in read_tracks(str(live))}
+    assert sorted(b) == sorted(a) and len(a) == 100
+    ids = set()
+    for frame in sorted(a):
+        ta, tb = a[frame].tracks, b[frame].tracks
+        assert [(t.id, t.state) for t in tb] == [(t.id, t.state) for t in ta], frame
+        for x, y in zip(ta, tb):
+            # float32 keypoints in the messages vs float64 from JSON: sub-millimetre
+            np.testing.assert_allclose(y.joints, x.joints, atol=2e-3, equal_nan=True)
+            if x.state == TrackState.CONFIRMED:
+                ids.add(x.id)
+    assert len(ids) >= 2, 'the two people of the sequence were not tracked'
+    assert Path(live).stat().st_size > 0
