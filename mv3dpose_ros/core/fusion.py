@@ -337,21 +337,28 @@ class Fusion:
         cfg = self.config
         g = gidx.T                                                       # [C, K]
         u, v, w = u_all[g], v_all[g], w_all[g]                           # [C, K, J]
-        swaps = 0
-        if cfg.swap_check and len(self._flip_pairs) and len(members):
-            # references: each candidate's first views in association order
-            has = members[:, self._order] >= 0                           # [K, C]
-            rank = np.where(has, np.arange(len(self._order)), len(self._order))
-            first = np.sort(rank, axis=1)[:, :cfg.max_reference_views + 1]
-            ref = np.where(first < len(self._order),
-                           self._order[np.minimum(first, len(self._order) - 1)], -1)
-            sw = swapped_views(u, v, w, self._essentials, self._flip_pairs, cfg.swap_ratio,
-                               ref_cams=ref.T)
-            if sw.any():
-                swaps = int(sw.sum())
-                u, v, w = swap_pairs(u, v, w, sw, self._flip_pairs)
         tri = triangulate_robust(u, v, w, self._projections, self._focal,
                                  cfg.reprojection_gate_norm, cfg.min_views, self._basis)
+        swaps = 0
+        if cfg.swap_check and len(self._flip_pairs) and len(members):
+            # A swapped view disagrees with the triangulation on a left or right joint; only
+            # such (view, candidate, pair) triples are tested (in 2D, where the swap cannot
+            # contaminate the test).
+            fp = self._flip_pairs
+            err = tri.view_error
+            trigger = 0.3 * cfg.reprojection_gate_norm
+            suspect = np.isfinite(err[:, :, fp[:, 0]]) & np.isfinite(err[:, :, fp[:, 1]]) \
+                & (np.maximum(err[:, :, fp[:, 0]], err[:, :, fp[:, 1]]) > trigger)
+            if suspect.any():
+                sw = swapped_views(u, v, w, self._essentials, fp, cfg.swap_ratio,
+                                   ref_cams=self._reference_views(members),
+                                   suspects=np.nonzero(suspect))
+                if sw.any():
+                    swaps = int(sw.sum())
+                    u, v, w = swap_pairs(u, v, w, sw, self._flip_pairs)
+                    tri = triangulate_robust(u, v, w, self._projections, self._focal,
+                                             cfg.reprojection_gate_norm, cfg.min_views,
+                                             self._basis)
         if cfg.bone_check and len(members):
             bad = bone_outliers(tri.joints, self._bones, self._bone_lo, self._bone_hi,
                                 tri.error)
@@ -362,6 +369,14 @@ class Fusion:
             tri = _subset(tri, keep)
             members, gidx = members[keep], gidx[keep]
         return tri, members, gidx, swaps
+
+    def _reference_views(self, members: np.ndarray) -> np.ndarray:
+        """Return ``[R, K]`` cameras: each candidate's first views in association order."""
+        num_c = len(self._order)
+        has = members[:, self._order] >= 0                                   # [K, C]
+        first = np.sort(np.where(has, np.arange(num_c), num_c), axis=1)
+        first = first[:, :self.config.max_reference_views + 1]
+        return np.where(first < num_c, self._order[np.minimum(first, num_c - 1)], -1).T
 
     def _merge(self, tri: Triangulation, members: np.ndarray, gidx: np.ndarray):
         """Merge candidates closer than merge_distance_m seen by disjoint cameras; else NMS."""
@@ -486,7 +501,8 @@ def _subset(tri: Triangulation, keep: np.ndarray) -> Triangulation:
     return Triangulation(joints=tri.joints[keep], confidence=tri.confidence[keep],
                          num_views=tri.num_views[keep], error=tri.error[keep],
                          error_px=tri.error_px[keep], used=tri.used[:, keep],
-                         gated=tri.gated[keep])
+                         gated=tri.gated[keep], worst_error=tri.worst_error[keep],
+                         view_error=tri.view_error[:, keep])
 
 
 def _normalised_bounds(cam: Camera, samples: int = 9) -> np.ndarray:

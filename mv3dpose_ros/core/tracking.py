@@ -173,26 +173,31 @@ class Tracker:
                 # Second chance for the leftovers with a wider gate, before new tracks are
                 # started: one noisy 3D pose should not fork a person's track.
                 free_t = np.nonzero(det < 0)[0]
-                free_d = np.setdiff1d(np.arange(num_d), cols)
+                taken = np.zeros(num_d, dtype=bool)
+                taken[cols] = True
+                free_d = np.nonzero(~taken)[0]
                 if len(free_t) and len(free_d):
                     r2, c2 = gated_assignment(cost[np.ix_(free_t, free_d)],
                                               np.maximum(gate[free_t, None], cfg.recovery_gate_m))
                     det[free_t[r2]] = free_d[c2]
         hit = det >= 0
-        if hit.any():
-            self._observe(hit, poses[det[hit]], stamp)
-        coast = ~hit & (tr.state != TrackState.TENTATIVE) \
-            & (stamp - tr.last_observed <= cfg.max_coast_s + 1e-9)
-        keep = hit | coast
-        tr.missed = np.where(hit, 0, tr.missed + 1)
-        tr.state = np.where(coast, np.int8(TrackState.COASTING), tr.state).astype(np.int8)
-        deleted = tr.take(~keep)
-        deleted.state[:] = TrackState.DELETED
-        kept = np.nonzero(keep)[0]
-        live = tr.take(kept)
-        used = np.zeros(num_d, dtype=bool)
-        used[det[hit]] = True
-        born = ~used
+        all_hit = bool(hit.all())
+        if num_t:
+            self._observe(hit, poses[det[hit]], stamp, all_hit)
+        if all_hit:                                 # the common case: nobody missed
+            deleted, kept, live = Tracks.empty(self.num_joints), np.arange(num_t), tr
+        else:
+            coast = ~hit & (tr.state != TrackState.TENTATIVE) \
+                & (stamp - tr.last_observed <= cfg.max_coast_s + 1e-9)
+            keep = hit | coast
+            tr.missed = np.where(hit, 0, tr.missed + 1)
+            tr.state = np.where(coast, np.int8(TrackState.COASTING), tr.state).astype(np.int8)
+            deleted = tr.take(~keep)
+            deleted.state[:] = TrackState.DELETED
+            kept = np.nonzero(keep)[0]
+            live = tr.take(kept)
+        born = np.ones(num_d, dtype=bool)
+        born[det[hit]] = False
         if num_d:
             born &= np.isfinite(poses[..., 0]).sum(axis=1) >= cfg.min_birth_joints
             if can_birth is not None:
@@ -215,30 +220,37 @@ class Tracker:
                       first_seen=np.full(n, stamp), last_observed=np.full(n, stamp),
                       hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
 
-    def _observe(self, hit: np.ndarray, obs: np.ndarray, stamp: float) -> None:
-        """Fold the observations ``obs`` into the tracks ``hit`` (mask)."""
+    def _observe(self, hit: np.ndarray, obs: np.ndarray, stamp: float,
+                 all_hit: bool = False) -> None:
+        """Fold the observations ``obs`` into the tracks ``hit`` (mask; ``all_hit``: all)."""
         cfg = self.config
         tr = self.tracks
-        old = tr.pose[hit]
-        dt = stamp - tr.last_observed[hit]
+        if all_hit:
+            old, fresh_old, prev = tr.pose, tr.fresh, tr.velocity
+            dt = stamp - tr.last_observed
+        else:
+            old, fresh_old, prev = tr.pose[hit], tr.fresh[hit], tr.velocity[hit]
+            dt = stamp - tr.last_observed[hit]
         ok = np.isfinite(obs[..., 0])
-        both = ok & tr.fresh[hit]
+        both = ok & fresh_old
         n = both.sum(axis=1)
         with np.errstate(invalid='ignore', divide='ignore'):
             v = np.where(both[..., None], obs - old, 0.0).sum(axis=1) / (n * dt)[:, None]
         good = (n >= cfg.min_shared_joints) & (dt > 0)
-        prev = tr.velocity[hit]
         a = cfg.velocity_smoothing
         blended = np.where(np.isfinite(prev), a * prev + (1 - a) * v, v)
-        vel = tr.velocity.copy()
-        vel[hit] = np.where(good[:, None], blended, prev)
-        pose = tr.pose.copy()
-        pose[hit] = np.where(ok[..., None], obs, old)
-        fresh = tr.fresh.copy()
-        fresh[hit] = ok
-        tr.pose, tr.fresh, tr.velocity = pose, fresh, vel
-        tr.hits = tr.hits + hit
-        tr.last_observed = np.where(hit, stamp, tr.last_observed)
+        vel = np.where(good[:, None], blended, prev)
+        pose = np.where(ok[..., None], obs, old)
+        if all_hit:
+            tr.pose, tr.fresh, tr.velocity = pose, ok, vel
+            tr.hits = tr.hits + 1
+            tr.last_observed = np.full(len(tr), stamp)
+            tr.missed = np.zeros(len(tr), dtype=np.int64)
+        else:
+            tr.pose, tr.fresh, tr.velocity = tr.pose.copy(), tr.fresh.copy(), tr.velocity.copy()
+            tr.pose[hit], tr.fresh[hit], tr.velocity[hit] = pose, ok, vel
+            tr.hits = tr.hits + hit
+            tr.last_observed = np.where(hit, stamp, tr.last_observed)
         confirm = hit & ((tr.state == TrackState.COASTING) | (tr.hits >= cfg.confirm_hits))
         tr.state = np.where(confirm, np.int8(TrackState.CONFIRMED), tr.state).astype(np.int8)
 

@@ -183,6 +183,9 @@ class Triangulation:
     error_px: np.ndarray      # [K, J] the same in pixels of each camera, NaN where rejected
     used: np.ndarray          # [C, K, J] bool, views that contributed
     gated: np.ndarray         # [K, J] bool, a view failed the reprojection gate (retried)
+    worst_error: np.ndarray   # [K, J] largest reprojection error of a view before the gate
+    view_error: np.ndarray    # [C, K, J] final reprojection error of every observation,
+    #                           dropped ones included (inf: not observed)
 
 
 def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np.ndarray,
@@ -199,6 +202,7 @@ def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections:
     if basis is None:
         basis = dlt_basis(projections)
     used = (w > 0) & np.isfinite(u) & np.isfinite(v)
+    observed = used
     w = np.where(used, w, 0.0)
     x = triangulate_dlt(u, v, w, projections, basis=basis)
     err, depth = _errors(x, u, v, projections)
@@ -228,7 +232,8 @@ def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections:
         err_px = (err_used * focal_px[:, None, None]).sum(axis=0) * inv
     joints = np.where(bad, np.nan, x).transpose(1, 2, 0)
     return Triangulation(joints=joints, confidence=conf, num_views=nviews, error=err_mean,
-                         error_px=err_px, used=used, gated=gated)
+                         error_px=err_px, used=used, gated=gated, worst_error=worst,
+                         view_error=np.where(observed, err, np.inf))
 
 
 def _errors(x: np.ndarray, u: np.ndarray, v: np.ndarray,
@@ -269,65 +274,69 @@ def bone_outliers(joints: np.ndarray, bones: np.ndarray, lo: np.ndarray, hi: np.
 
 
 def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.ndarray,
-                  flip_pairs: np.ndarray, ratio: float = 0.5, min_distance: float = 0.0,
-                  ref_cams: Optional[np.ndarray] = None) -> np.ndarray:
+                  flip_pairs: np.ndarray, ratio: float = 0.5,
+                  ref_cams: Optional[np.ndarray] = None,
+                  suspects: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
+                  ) -> np.ndarray:
     """
     Find single views whose left/right labels of a joint pair are swapped.
 
     Works in 2D, view against view, so a mislabelled view cannot contaminate the test (a
-    triangulation would be pulled towards it). For every candidate, joint pair ``(a, b)``, view
-    ``p`` and reference view ``r`` of it, the symmetric epipolar distances of the labels as
-    given, ``d(a_p, a_r) + d(b_p, b_r)``, are compared with the crossed ones,
-    ``d(a_p, b_r) + d(b_p, a_r)``. A view is swapped when the crossed labels fit better by
-    ``ratio`` (and the given ones miss by more than ``min_distance``) against a strict
-    majority, and at least two, of the references it is compared with: one swapped view among
-    three or more disagrees with all others, while the others disagree only with it.
-    ``u, v, w [C, K, J]`` are camera-major normalised points and weights, ``essentials``
-    ``[C, C, 3, 3]`` with ``x_b^T E[a, b] x_a = 0``; ``ref_cams [R, K]`` are the reference
-    cameras of each candidate (-1 = none; default every camera), a few of which keep the cost
-    linear in the number of cameras. Returns ``[C, K, F]`` booleans.
+    triangulation would be pulled towards it). For a view ``p`` of a candidate, a joint pair
+    ``(a, b)`` and a reference view ``r`` of the same candidate, the symmetric epipolar
+    distances of the labels as given, ``d(a_p, a_r) + d(b_p, b_r)``, are compared with the
+    crossed ones, ``d(a_p, b_r) + d(b_p, a_r)``. The view is swapped when the crossed labels
+    fit better by ``ratio`` against a strict majority, and at least two, of its references:
+    one swapped view among three or more disagrees with all others, while the others disagree
+    only with it. ``u, v, w [C, K, J]`` are camera-major normalised points and weights,
+    ``essentials [C, C, 3, 3]`` with ``x_b^T E[a, b] x_a = 0``; ``ref_cams [R, K]`` the
+    reference cameras of each candidate (-1 = none; default every camera), a few of which
+    keep the cost linear in the number of cameras; ``suspects`` = ``(c, k, f)`` index arrays
+    of the (view, candidate, pair) triples to test (default: all). Returns ``[C, K, F]``
+    booleans.
     """
     fp = np.asarray(flip_pairs, dtype=int).reshape(-1, 2)
     num_c, num_k = w.shape[:2]
-    nf = len(fp)
-    out = np.zeros((num_c, num_k, nf), dtype=bool)
-    if num_k == 0 or nf == 0 or num_c < 3:
+    out = np.zeros((num_c, num_k, len(fp)), dtype=bool)
+    if num_k == 0 or len(fp) == 0 or num_c < 3:
         return out
     if ref_cams is None:
         ref_cams = np.repeat(np.arange(num_c)[:, None], num_k, axis=1)
-    num_r = len(ref_cams)
-    idx = np.concatenate((fp[:, 0], fp[:, 1]))                          # a joints, b joints
-    seen = (w[:, :, idx] > 0).reshape(num_c, num_k, 2, nf)
-    both = seen[:, :, 0] & seen[:, :, 1]                                 # [C, K, F]
-    if (both.sum(axis=0) < 3).all():
+    if suspects is None:
+        suspects = np.nonzero((w[:, :, fp[:, 0]] > 0) & (w[:, :, fp[:, 1]] > 0))
+    sc, sk, sf = (np.asarray(i, dtype=int) for i in suspects)
+    if len(sc) == 0:
         return out
-    x = np.stack([u[:, :, idx], v[:, :, idx], np.ones((num_c, num_k, 2 * nf))], axis=-1)
-    rc = np.maximum(ref_cams, 0)
-    kk = np.arange(num_k)[None, :]
-    xr = x[rc, kk][None]                                                 # [1, R, K, 2F, 3]
-    xp = x[:, None]                                                      # [C, 1, K, 2F, 3]
-    e = essentials[rc[None, :, :], np.arange(num_c)[:, None, None]]      # [C, R, K, 3, 3]
-    lines_p = xr @ np.swapaxes(e, -1, -2)            # in view p, of the reference points
-    lines_r = xp @ e                                 # in the reference view, of p's points
-    shape = (num_c, num_r, num_k, 2, nf)
+    ja, jb = fp[sf, 0], fp[sf, 1]                                        # [S]
+    refs = ref_cams[:, sk].T                                             # [S, R]
+    rc = np.maximum(refs, 0)
+    kk = sk[:, None]
+
+    def points(c, k, j):
+        return np.stack([u[c, k, j], v[c, k, j], np.ones(np.shape(u[c, k, j]))], axis=-1)
+
+    # labels (a, b) of the suspect view and of each reference: [S, 1, 2, 3] and [S, R, 2, 3]
+    xp = np.stack([points(sc, sk, ja), points(sc, sk, jb)], axis=1)[:, None]
+    xr = np.stack([points(rc, kk, ja[:, None]), points(rc, kk, jb[:, None])], axis=2)
+    e = essentials[rc, sc[:, None]]                                      # [S, R, 3, 3]
+    lines_p = xr @ np.swapaxes(e, -1, -2)            # in the suspect view, of the references
+    lines_r = xp @ e                                 # in the references, of the suspect
+    alg = np.abs(xp @ np.swapaxes(lines_p, -1, -2))                      # [S, R, i, j]
     with np.errstate(invalid='ignore', divide='ignore'):
-        inv_p = (1.0 / np.hypot(lines_p[..., 0], lines_p[..., 1])).reshape(shape)
-        inv_r = (1.0 / np.hypot(lines_r[..., 0], lines_r[..., 1])).reshape(shape)
-        lp = lines_p.reshape(shape + (3,))
-        xpp = xp.reshape((num_c, 1, num_k, 2, nf, 3))
-        # |x_p(label i)^T E x_r(label j)| for all label pairs: [C, R, K, i, j, F]
-        alg = np.abs((xpp[:, :, :, :, None] * lp[:, :, :, None]).sum(axis=-1))
-        d_same = alg[:, :, :, 0, 0] * (inv_p[:, :, :, 0] + inv_r[:, :, :, 0]) \
-            + alg[:, :, :, 1, 1] * (inv_p[:, :, :, 1] + inv_r[:, :, :, 1])
-        d_cross = alg[:, :, :, 0, 1] * (inv_p[:, :, :, 1] + inv_r[:, :, :, 0]) \
-            + alg[:, :, :, 1, 0] * (inv_p[:, :, :, 0] + inv_r[:, :, :, 1])
-        pair = (ref_cams[None] >= 0) & (ref_cams[None] != np.arange(num_c)[:, None, None])
-        valid = both[:, None] & both[rc, kk][None] & pair[..., None] \
+        inv_p = 1.0 / np.hypot(lines_p[..., 0], lines_p[..., 1])         # [S, R, j]
+        inv_r = 1.0 / np.hypot(lines_r[..., 0], lines_r[..., 1])         # [S, R, i]
+        d_same = alg[..., 0, 0] * (inv_p[..., 0] + inv_r[..., 0]) \
+            + alg[..., 1, 1] * (inv_p[..., 1] + inv_r[..., 1])
+        d_cross = alg[..., 0, 1] * (inv_p[..., 1] + inv_r[..., 0]) \
+            + alg[..., 1, 0] * (inv_p[..., 0] + inv_r[..., 1])
+        seen = (w[rc, kk, ja[:, None]] > 0) & (w[rc, kk, jb[:, None]] > 0)
+        valid = (refs >= 0) & (refs != sc[:, None]) & seen \
             & np.isfinite(d_same) & np.isfinite(d_cross)
-        better = valid & (d_cross < ratio * d_same) & (0.5 * d_same > min_distance)
-    n_ok = valid.sum(axis=1)
-    n_better = better.sum(axis=1)
-    return (n_better >= 2) & (2 * n_better > n_ok)
+        better = valid & (d_cross < ratio * d_same)
+    n_ok, n_better = valid.sum(axis=1), better.sum(axis=1)
+    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w[sc, sk, ja] > 0) \
+        & (w[sc, sk, jb] > 0)
+    return out
 
 
 def swap_pairs(u: np.ndarray, v: np.ndarray, w: np.ndarray, swapped: np.ndarray,
