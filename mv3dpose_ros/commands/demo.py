@@ -521,9 +521,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'image pipeline through pose2d_node (default: synthetic rig)')
     parser.add_argument('--calibration', help='calibration file for --images (default: the '
                                               'one .json/.toml/.yaml in DIR)')
-    parser.add_argument('-o', '--output-dir', default='demo_output',
+    parser.add_argument('-o', '--output-dir', default=os.path.join('out', 'demo'),
                         help='where bags, logs, tracks and the picture go (default: '
-                             './demo_output; its previous demo run is replaced)')
+                             'out/demo; the previous demo run there is replaced)')
     parser.add_argument('--cameras', type=int, default=4, help='synthetic cameras')
     parser.add_argument('--people', type=int, default=3, help='synthetic people')
     parser.add_argument('--frames', type=int, default=150, help='synthetic frames')
