@@ -20,7 +20,8 @@ default detector noise: pixel noise, missed joints and people, false positives, 
 whole pipeline (association, triangulation with gates, tracking, causal smoothing) runs as it
 would live. The reference implementation's published figures are printed beside ours.
 
-Usage: ``python bench/bench_fusion.py [--frames N] [--configs 5x4,16x6] [--profile 5x4]``
+Usage: ``python bench/bench_fusion.py [--frames N] [--repeat R] [--configs 5x4,16x6]
+[--profile 5x4]``
 """
 
 import argparse
@@ -62,28 +63,40 @@ def _scene(cams: int, people: int, frames: int, seed: int):
 
 
 def bench(cams: int, people: int, frames: int, seed: int = 0,
-          config: FusionConfig = None) -> dict:
-    """Run one configuration; return timing figures and what was tracked."""
+          config: FusionConfig = None, repeat: int = 3) -> dict:
+    """
+    Run one configuration ``repeat`` times; return the best run's timing figures.
+
+    The best of several runs filters out time stolen by other processes on a shared machine;
+    every run replays the same scene through a fresh ``Fusion``.
+    """
     scene = _scene(cams, people, frames, seed)
-    fusion = Fusion(scene.cameras, scene.layout, config)
-    times = []
-    confirmed = 0
-    for i, (stamp, views) in enumerate(scene.frames()):
-        t0 = time.perf_counter()
-        out = fusion.step(views, stamp)
-        dt = time.perf_counter() - t0
-        if i >= 5:                                  # warm-up: imports, caches, track births
-            times.append(dt)
-        confirmed = sum(1 for t in out if t.state == 1)
-    times = np.array(times) * 1e3
-    return {'median_ms': float(np.median(times)), 'p90_ms': float(np.percentile(times, 90)),
-            'confirmed': confirmed, 'people': people}
+    best = None
+    for _ in range(repeat):
+        fusion = Fusion(scene.cameras, scene.layout, config)
+        times = []
+        confirmed = 0
+        for i, (stamp, views) in enumerate(scene.frames()):
+            t0 = time.perf_counter()
+            out = fusion.step(views, stamp)
+            dt = time.perf_counter() - t0
+            if i >= 5:                              # warm-up: imports, caches, track births
+                times.append(dt)
+            confirmed = sum(1 for t in out if t.state == 1)
+        times = np.array(times) * 1e3
+        run = {'median_ms': float(np.median(times)), 'p90_ms': float(np.percentile(times, 90)),
+               'confirmed': confirmed, 'people': people}
+        if best is None or run['median_ms'] < best['median_ms']:
+            best = run
+    return best
 
 
 def main() -> int:
     """Print the benchmark table."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--frames', type=int, default=60, help='frames per configuration')
+    parser.add_argument('--repeat', type=int, default=3,
+                        help='runs per configuration; the best median is printed')
     parser.add_argument('--configs', default=','.join(f'{c}x{p}' for c, p in CONFIGS),
                         help='comma-separated CAMERASxPEOPLE list')
     parser.add_argument('--profile', default='', help='CAMERASxPEOPLE to profile (cProfile)')
@@ -103,12 +116,12 @@ def main() -> int:
         prof.disable()
         pstats.Stats(prof).sort_stats('cumulative').print_stats(30)
         return 0
-    print(f'Fusion.step, one core ({pin}), {args.frames} frames per row, numpy '
-          f'{np.__version__}')
+    print(f'Fusion.step, one core ({pin}), {args.frames} frames per row, best median of '
+          f'{args.repeat} runs, numpy {np.__version__}')
     print(f'{"cams x people":>14} {"median ms":>10} {"p90 ms":>8} {"confirmed":>10} '
           f'{"reference ms":>13}')
     for c, p in configs:
-        r = bench(c, p, args.frames)
+        r = bench(c, p, args.frames, repeat=args.repeat)
         ref = REFERENCE_MS.get((c, p), '-')
         print(f'{f"{c} x {p}":>14} {r["median_ms"]:10.2f} {r["p90_ms"]:8.2f} '
               f'{r["confirmed"]:>6}/{p:<3} {ref:>13}', flush=True)
