@@ -39,8 +39,8 @@ def _person_msg(i: int):
     kps = [t['mv3dpose_msgs/msg/Keypoint2D'](x=float(i + j), y=float(2 * j), confidence=0.5)
            for j in range(17)]
     person = t['mv3dpose_msgs/msg/Person2D'](
-        roi=t['sensor_msgs/msg/RegionOfInterest'](x_offset=i, y_offset=2, height=3, width=4,
-                                                   do_rectify=False),
+        roi=t['sensor_msgs/msg/RegionOfInterest'](
+            x_offset=i, y_offset=2, height=3, width=4, do_rectify=False),
         score=0.25, id=f'p{i}', keypoints=kps)
     header = t['std_msgs/msg/Header'](stamp=t['builtin_interfaces/msg/Time'](sec=i, nanosec=7),
                                       frame_id='cam0_optical')
@@ -392,3 +392,40 @@ def test_pace_on_waits_for_a_slow_node(ros_context, tmp_path):
     assert seen == [f'hello {i}' for i in range(n)]
     assert 'pace:' not in stderr
     node.destroy_node()
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_ctrl_c_stops_record_and_loop_play_cleanly(tmp_path):
+    """SIGINT ends a looping player and a recorder; the recorded bag is complete and valid."""
+    import signal
+    _write_bag(tmp_path / 'bag', n=5, step_ns=20_000_000)
+    out = tmp_path / 'rec'
+    recorder = subprocess.Popen(MV3DPOSE + ['bag', 'record', '/chatter', '-o', str(out), '-q'],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    player = None
+    try:
+        # the recorder subscribes once it sees the player's publisher (to learn its QoS)
+        player = subprocess.Popen(
+            MV3DPOSE + ['bag', 'play', str(tmp_path / 'bag'), '--loop', '--topics', '/chatter',
+                        '--wait-for-subscribers', '20', '-q'],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(2.5)   # several loops of the 0.18 s bag
+        assert player.poll() is None, 'a looping player must keep playing'
+        player.send_signal(signal.SIGINT)
+        _, perr = player.communicate(timeout=20)
+        time.sleep(0.5)
+        recorder.send_signal(signal.SIGINT)
+        rout, rerr = recorder.communicate(timeout=20)
+    finally:
+        for proc in (player, recorder):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+    assert player.returncode == 0, perr
+    assert recorder.returncode == 0, rerr
+    with BagReader(out) as reader:
+        data = [m.data for _, _, m in reader.decoded()]
+    assert len(data) > 10, 'the loop should have played the 5 messages several times'
+    assert data[:5] == [f'hello {i}' for i in range(5)]
+    assert data[5:10] == data[:5], 'second loop differs'
+    assert sorted(os.listdir(tmp_path)) == ['bag', 'rec']
