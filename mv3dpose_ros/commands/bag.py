@@ -176,6 +176,7 @@ def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = D
     from rclpy.parameter import Parameter
 
     wanted = list(topics or [])
+    writer = BagWriter(output, storage=storage, overwrite=overwrite)   # fails before any DDS
     own_context = context is None
     if own_context:
         context = _init_rclpy()
@@ -185,7 +186,6 @@ def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = D
     executor.add_node(node)
     subs = {}
     state = {'total': 0, 'last': None}
-    writer = BagWriter(output, storage=storage, overwrite=overwrite)
     bar = _progress(None, f'recording {output}', disable=True if quiet else None)
     log = node.get_logger()
 
