@@ -414,16 +414,22 @@ class Fusion:
         tr: Tracks = self.tracker.tracks
         num_t, num_j = len(tr), self.layout.num_joints
         seen = det >= 0
-        # Row K of the padded arrays is "not observed".
-        z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan)))[det]
-        conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j))))[det]
-        num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int)))[det]
-        err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan)))[det]
-        conf_prev = np.where((previous >= 0)[:, None],
-                             self._confidence[np.maximum(previous, 0)] if len(self._confidence)
-                             else 0.0, 0.0)
+        if seen.all():
+            z, conf_obs = tri.joints[det], tri.confidence[det]
+            num_views, err = tri.num_views[det], tri.error_px[det]
+        else:                            # row K of the padded arrays is "not observed"
+            z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan)))[det]
+            conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j))))[det]
+            num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int)))[det]
+            err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan)))[det]
         observed = np.isfinite(z[..., 0])
-        conf_last = np.where(observed, conf_obs, conf_prev)
+        if observed.all():
+            conf_last = conf_obs
+        else:
+            conf_prev = np.where((previous >= 0)[:, None],
+                                 self._confidence[np.maximum(previous, 0)]
+                                 if len(self._confidence) else 0.0, 0.0)
+            conf_last = np.where(observed, conf_obs, conf_prev)
         self._confidence = conf_last
         if self._filter is not None:
             self._filter.reindex(previous)

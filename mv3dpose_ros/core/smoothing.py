@@ -61,6 +61,8 @@ class CausalFilter:
     def reindex(self, previous: np.ndarray) -> None:
         """Rearrange rows: new row ``i`` continues old row ``previous[i]`` (-1 = a new track)."""
         previous = np.asarray(previous, dtype=int)
+        if len(previous) == len(self.x) and (previous == np.arange(len(previous))).all():
+            return                                      # same tracks in the same rows
         new = previous < 0
         src = np.where(new, 0, previous)
         if len(self.x) == 0:

@@ -169,7 +169,7 @@ class Tracker:
             gate = cfg.gate_m + cfg.gate_growth_mps * np.maximum(stamp - tr.last_observed, 0.0)
             rows, cols = gated_assignment(cost, gate[:, None])
             det[rows] = cols
-            if cfg.recovery_gate_m > 0:
+            if cfg.recovery_gate_m > 0 and len(rows) < min(num_t, num_d):
                 # Second chance for the leftovers with a wider gate, before new tracks are
                 # started: one noisy 3D pose should not fork a person's track.
                 free_t = np.nonzero(det < 0)[0]
