@@ -177,8 +177,8 @@ class Fusion:
         #: ``[K, C]`` index of the input 2D pose (in ``views[camera]``) behind each of
         #: ``last_poses`` per camera (rig order), -1 where a camera did not contribute.
         self.last_members = np.zeros((0, len(self.cameras)), dtype=int)
-        #: Figures of the last step (counts, median reprojection error in px).
-        self.last_info: Dict[str, float] = {}
+        self._info: Dict[str, float] = {}
+        self._info_tri: Optional[Triangulation] = None
 
     def _new_filter(self) -> None:
         cfg = self.config
@@ -216,13 +216,26 @@ class Fusion:
         self._last_stamp = stamp
         tri, members = self._reconstruct(views)
         self.last_poses = tri.joints
-        in_view = self.cameras_in_view(tri.joints)
         views = (members >= 0).sum(axis=1)
-        birth = (in_view >= self._birth_views) \
-            & (views >= self.config.min_birth_view_ratio * in_view)
-        upd = self.tracker.update(tri.joints, stamp, birth)
+
+        def can_birth(rows: np.ndarray) -> np.ndarray:
+            # only for poses left unmatched: inside the shared field of view, well supported
+            in_view = self.cameras_in_view(tri.joints[rows])
+            return (in_view >= self._birth_views) \
+                & (views[rows] >= self.config.min_birth_view_ratio * in_view)
+
+        upd = self.tracker.update(tri.joints, stamp, can_birth)
         return self._outputs(upd.detection, upd.previous, tri, members, stamp) + tombs \
             + self._tombstones(upd.deleted)
+
+    @property
+    def last_info(self) -> Dict[str, float]:
+        """Figures of the last step: counts, swaps, merges, median reprojection error (px)."""
+        info = dict(self._info)
+        if self._info_tri is not None:
+            err = self._info_tri.error_px[np.isfinite(self._info_tri.error_px)]
+            info['reprojection_error_px'] = float(np.median(err)) if err.size else float('nan')
+        return info
 
     def cameras_in_view(self, poses: np.ndarray) -> np.ndarray:
         """Count, per pose ``[K, J, 3]``, the cameras whose image contains its joint centroid."""
@@ -327,9 +340,7 @@ class Fusion:
                                                               gidx)
         info.update(swapped_pairs=swaps, merged=merged, poses_3d=len(members))
         self.last_members = np.where(members >= 0, self._source[gidx], -1)
-        err = tri.error_px[np.isfinite(tri.error_px)]
-        info['reprojection_error_px'] = float(np.median(err)) if err.size else float('nan')
-        self.last_info = info
+        self._info, self._info_tri = info, tri
         return tri, members
 
     def _triangulate(self, u_all, v_all, w_all, members, gidx):

@@ -37,7 +37,7 @@ operations whatever the number of people.
 """
 
 from dataclasses import dataclass, fields
-from typing import Optional
+from typing import Callable, Optional, Union
 
 from mv3dpose_ros.core.association import gated_assignment
 from mv3dpose_ros.core.types import TrackState
@@ -152,13 +152,16 @@ class Tracker:
         return dropped
 
     def update(self, poses: np.ndarray, stamp: float,
-               can_birth: Optional[np.ndarray] = None) -> TrackUpdate:
+               can_birth: Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray]] = None
+               ) -> TrackUpdate:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
 
         Updates ``self.tracks`` (live tracks: matched, coasting, and new ones last) and returns
         which pose each live track took. Unmatched poses start tracks only where
-        ``can_birth [D]`` (default: all) holds and they have ``min_birth_joints`` joints.
+        ``can_birth [D]`` (default: all) holds and they have ``min_birth_joints`` joints;
+        ``can_birth`` may also be a function of the indices ``[N]`` of the unmatched poses
+        returning ``[N]`` booleans, so its work is only done when there are any.
         """
         cfg = self.config
         tr = self.tracks
@@ -200,7 +203,10 @@ class Tracker:
         born[det[hit]] = False
         if num_d:
             born &= np.isfinite(poses[..., 0]).sum(axis=1) >= cfg.min_birth_joints
-            if can_birth is not None:
+            if callable(can_birth):
+                if born.any():
+                    born[born] = can_birth(np.nonzero(born)[0])
+            elif can_birth is not None:
                 born &= can_birth
         new = np.nonzero(born)[0]
         if len(new):
