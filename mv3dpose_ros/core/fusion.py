@@ -16,14 +16,21 @@
 The multi-view fusion pipeline: 2D poses of calibrated cameras in, tracked 3D skeletons out.
 
 One ``Fusion.step`` per synchronised set of views runs the whole of Tanke & Gall's method:
-undistort every keypoint once, associate poses across views (``core.association``),
-triangulate with a reprojection gate, undo single-view left/right swaps, reject implausible
-bones, merge duplicate candidates (``core.triangulation``), track (``core.tracking``) and
-smooth causally (``core.smoothing``). The live node and the offline command both call it, so
-their results agree frame for frame.
+normalise every keypoint once, associate poses across views with cameras taken in a
+wide-angle-first order (``core.association``), triangulate with a reprojection gate, undo
+single-view left/right swaps, reject implausible bones (``core.triangulation``), merge or
+suppress duplicate 3D candidates, track (``core.tracking``) and smooth causally
+(``core.smoothing``). The live node and the offline command both call it, so their results
+agree frame for frame.
+
+New tracks start only from candidates inside the rig's shared field of view (their centroid
+in the images of ``min_birth_cameras_in_view`` cameras) and detected by at least
+``min_birth_view_ratio`` of the cameras that should see them; this keeps bystanders outside
+the working volume and two-view "ghost" pairings from becoming tracks. Existing tracks are
+updated by any candidate.
 
 Units: thresholds on image distances are in normalised image units (pixels / focal length;
-0.02 = 20 px at f = 1000 px), 3D distances in metres, times in seconds (field names say so).
+0.025 = 25 px at f = 1000 px), 3D distances in metres, times in seconds (field names say so).
 """
 
 from dataclasses import asdict, dataclass
