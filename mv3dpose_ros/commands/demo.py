@@ -252,6 +252,29 @@ def _player(bag: Path, ctx, published: Dict[int, int], quiet: bool, **kwargs) ->
     return play(str(bag), context=ctx, on_publish=on_publish, quiet=quiet, **kwargs)
 
 
+def _play_and_collect(pipeline: 'Pipeline', ctx, input_bag: Path, output_bag: Path,
+                      quiet: bool, settle_s: float, **player_kwargs) -> tuple:
+    """Play the input bag into the running pipeline, stop it, and read the recorded tracks."""
+    try:
+        published: Dict[int, int] = {}
+        t0 = time.monotonic()
+        n = _player(input_bag, ctx, published, quiet, **player_kwargs)
+        play_s = time.monotonic() - t0
+        time.sleep(settle_s)  # let the last sets through the synchroniser and DDS
+        pipeline.check()
+        if pipeline.stop('recorder') not in (0, None):
+            raise DemoError('the recorder failed:\n' + pipeline.tail('recorder'))
+    finally:
+        pipeline.stop_all()
+    frames = read_output(output_bag)
+    _say(f'played:    {n} messages in {_span_s(published):.1f} s ({play_s:.1f} s with '
+         f'discovery); recorded {len(frames)} tracks messages in {output_bag}')
+    if not frames:
+        raise DemoError('no tracks were recorded; fusion_node log:\n'
+                        + pipeline.tail('fusion_node'))
+    return frames, published
+
+
 def run_synthetic(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     """Run a simulated rig -> Person2DArray bag -> player -> fusion_node -> recorder; score it."""
     from mv3dpose_ros.commands.convert import persons_topic
@@ -300,23 +323,12 @@ def run_synthetic(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
         _wait_for_nodes(ctx, pipeline, [persons_topic(c) for c in cams], args.timeout)
         _say(f'nodes:     fusion_node (use_sim_time) and recorder up; playing at rate '
              f'{args.rate:g}')
-        published: Dict[int, int] = {}
-        t0 = time.monotonic()
-        n = _player(input_bag, ctx, published, args.quiet, rate=args.rate,
-                    wait_for_subscribers=args.timeout)
-        play_s = time.monotonic() - t0
-        time.sleep(2.0)  # let the last sets through the synchroniser and DDS
-        pipeline.check()
-        if pipeline.stop('recorder') not in (0, None):
-            raise DemoError('the recorder failed:\n' + pipeline.tail('recorder'))
-    finally:
+    except BaseException:
         pipeline.stop_all()
-    frames = read_output(output_bag)
-    _say(f'played:    {n} messages in {_span_s(published):.1f} s ({play_s:.1f} s with '
-         f'discovery); recorded {len(frames)} tracks messages in {output_bag}')
-    if not frames:
-        raise DemoError('no tracks were recorded; fusion_node log:\n'
-                        + pipeline.tail('fusion_node'))
+        raise
+    frames, published = _play_and_collect(pipeline, ctx, input_bag, output_bag, args.quiet,
+                                          settle_s=2.0, rate=args.rate,
+                                          wait_for_subscribers=args.timeout)
 
     by_stamp = {f['stamp']: f for f in frames}
     index = {s: t for t, s in enumerate(stamps)}
@@ -432,24 +444,13 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
                         args.timeout, published=pose_topics)
         _say(f'nodes:     {len(cams)} x pose2d_node, fusion_node, recorder up; the player '
              'waits for every node after each time point')
-        published: Dict[int, int] = {}
-        t0 = time.monotonic()
-        n = _player(input_bag, ctx, published, args.quiet, rate=0.0,
-                    wait_for_subscribers=args.timeout, pace_topics=pose_topics + [TRACKS_TOPIC],
-                    pace_timeout=args.timeout, wait_topics=[image_topic(c) for c in cams])
-        play_s = time.monotonic() - t0
-        time.sleep(1.0)
-        pipeline.check()
-        if pipeline.stop('recorder') not in (0, None):
-            raise DemoError('the recorder failed:\n' + pipeline.tail('recorder'))
-    finally:
+    except BaseException:
         pipeline.stop_all()
-    frames = read_output(output_bag)
-    _say(f'played:    {n} messages in {_span_s(published):.1f} s ({play_s:.1f} s with '
-         f'discovery); recorded {len(frames)} tracks messages in {output_bag}')
-    if not frames:
-        raise DemoError('no tracks were recorded; fusion_node log:\n'
-                        + pipeline.tail('fusion_node'))
+        raise
+    frames, published = _play_and_collect(
+        pipeline, ctx, input_bag, output_bag, args.quiet, settle_s=1.0, rate=0.0,
+        wait_for_subscribers=args.timeout, pace_topics=pose_topics + [TRACKS_TOPIC],
+        pace_timeout=args.timeout, wait_topics=[image_topic(c) for c in cams])
     people = [len(_observed(f['tracks'])) for f in frames]
     reproj = [float(e) for f in frames for t in _observed(f['tracks'])
               for e, s in zip(t.reprojection_error, t.joint_state)
