@@ -20,7 +20,7 @@ import pytest
 
 
 def test_layout_names_and_sizes():
-    sizes = {'coco17': 17, 'body25': 25, 'body25b': 25, 'shelf14': 14, 'panoptic19': 19}
+    sizes = {'coco17': 17, 'coco18': 18, 'body25': 25, 'body25b': 25, 'shelf14': 14, 'panoptic19': 19}
     assert set(LAYOUT_NAMES) == set(sizes)
     for name, n in sizes.items():
         layout = get_layout(name)
@@ -32,7 +32,7 @@ def test_layout_names_and_sizes():
 
 def test_unknown_layout_lists_known_names():
     with pytest.raises(ValueError, match='coco17.*panoptic19'):
-        get_layout('coco18')
+        get_layout('mpii16')
     with pytest.raises(ValueError, match="no joint 'neck'"):
         get_layout('coco17').index('neck')
 
@@ -143,3 +143,12 @@ def test_plain_xyz_and_bad_shapes():
         convert_poses(np.zeros((5, 17, 3)), 'shelf14', 'coco17')
     with pytest.raises(ValueError, match='unknown'):
         convert_poses(np.zeros((17, 3)), 'coco17', 'h36m')
+
+
+def test_openpose_coco18_is_body25_without_mid_hip_and_feet():
+    body25 = get_layout('body25').joint_names
+    coco18 = get_layout('coco18').joint_names
+    assert coco18 == tuple(n for n in body25[:19] if n != 'mid_hip')
+    poses = np.random.default_rng(3).uniform(0, 100, (2, 25, 3))
+    mapped = convert_poses(poses, 'body25', 'coco18')
+    np.testing.assert_array_equal(mapped, poses[:, [body25.index(n) for n in coco18]])

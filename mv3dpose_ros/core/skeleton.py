@@ -19,6 +19,7 @@ Every layout names its joints from one vocabulary (``'left_hip'``, ``'neck'``, .
 ``convert_poses`` maps joints by name. Layouts:
 
 - ``coco17``: COCO keypoints (what ONNX top-down/bottom-up pose models output).
+- ``coco18``: OpenPose COCO (18 joints: the COCO-17 joints in OpenPose order plus ``neck``).
 - ``body25``: OpenPose BODY_25 (``neck`` = the COCO-style mid-shoulder neck, ``mid_hip``).
 - ``body25b``: OpenPose experimental BODY_25B as used by Pose2Sim: the 17 COCO joints, then
   17 ``upper_neck`` (OpenPose "UpperNeck", Pose2Sim "Neck"), 18 ``head_top`` (Pose2Sim "Head"),
@@ -106,6 +107,11 @@ _JOINTS = {
         'left_shoulder', 'left_elbow', 'left_wrist', 'mid_hip',
         'right_hip', 'right_knee', 'right_ankle', 'left_hip', 'left_knee', 'left_ankle',
         'right_eye', 'left_eye', 'right_ear', 'left_ear') + _FEET,
+    'coco18': (
+        'nose', 'neck', 'right_shoulder', 'right_elbow', 'right_wrist',
+        'left_shoulder', 'left_elbow', 'left_wrist',
+        'right_hip', 'right_knee', 'right_ankle', 'left_hip', 'left_knee', 'left_ankle',
+        'right_eye', 'left_eye', 'right_ear', 'left_ear'),
     'body25b': _COCO17 + ('upper_neck', 'head_top') + _FEET,
     'shelf14': (
         'right_ankle', 'right_knee', 'right_hip', 'left_hip', 'left_knee', 'left_ankle',
@@ -137,6 +143,9 @@ _BONES = {
     'body25': _LIMBS + _FACE + _FOOT_BONES + (
         ('neck', 'nose'), ('neck', 'left_shoulder'), ('neck', 'right_shoulder'),
         ('neck', 'mid_hip'), ('mid_hip', 'left_hip'), ('mid_hip', 'right_hip')),
+    'coco18': _LIMBS + _FACE + (
+        ('neck', 'nose'), ('neck', 'left_shoulder'), ('neck', 'right_shoulder'),
+        ('left_shoulder', 'left_hip'), ('right_shoulder', 'right_hip'), ('left_hip', 'right_hip')),
     'body25b': _LIMBS + _FACE + _FOOT_BONES + (
         ('upper_neck', 'head_top'), ('upper_neck', 'nose'),
         ('upper_neck', 'left_shoulder'), ('upper_neck', 'right_shoulder'),
