@@ -128,3 +128,12 @@ def test_real_pose2sim_detections(shared_data):
     assert set(views) == set(found)
     assert all(v.shape[1:] == (25, 3) for v in views.values())
     assert not seq.issues
+
+
+def test_numbered_cameras_match_folders_by_their_number(tmp_path):
+    for name in ('Camera0', 'Camera1', 'Camera2', 'notes'):
+        (tmp_path / name).mkdir()
+    found, missing = match_camera_folders(str(tmp_path), ['0', '1', '2', '3'])
+    assert {cam: os.path.basename(f) for cam, f in found.items()} == {
+        '0': 'Camera0', '1': 'Camera1', '2': 'Camera2'}
+    assert len(missing) == 1 and "camera '3'" in missing[0]

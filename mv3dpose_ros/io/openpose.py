@@ -225,12 +225,19 @@ def _normalise(name: str) -> str:
     return re.sub(r'\d+', lambda m: str(int(m.group())), name)
 
 
+def _number(name: str) -> Optional[int]:
+    """Return the single number in a camera or folder name, or None if it has none or several."""
+    numbers = re.findall(r'\d+', _normalise(name))
+    return int(numbers[0]) if len(numbers) == 1 else None
+
+
 def match_camera_folders(root: str, cameras: Sequence[str]) -> Tuple[Dict[str, str], List[str]]:
     """
     Find the folder of each camera under ``root``.
 
     A folder named exactly like the camera wins; otherwise names are compared loosely, so
-    Pose2Sim's ``cam01_json`` is camera ``cam_01``. Returns ``(camera -> folder, messages)``
+    Pose2Sim's ``cam01_json`` is camera ``cam_01``, and last by their one number, so
+    ``Camera0`` is camera ``0`` of a VoxelPose calibration. Returns ``(camera -> folder, messages)``
     where messages name cameras without a folder; ambiguous matches raise ValueError listing
     the candidates.
     """
@@ -245,6 +252,9 @@ def match_camera_folders(root: str, cameras: Sequence[str]) -> Tuple[Dict[str, s
             continue
         key = _normalise(cam)
         cands = [d for d in subdirs if _normalise(d) == key]
+        if not cands and _number(cam) is not None:
+            # Numbered cameras ('0' in VoxelPose files) and folders like 'Camera0', 'c0_json'.
+            cands = [d for d in subdirs if _number(d) == _number(cam)]
         if len(cands) > 1:
             raise ValueError(f'camera {cam!r} matches several folders in {root}: '
                              f'{", ".join(cands)}; rename them or pass --cameras')
