@@ -22,7 +22,10 @@ one sub-folder of OpenPose JSON files per camera, named like the camera (loosely
 file names; frame ``n`` gets the stamp ``n / fps`` seconds. Every frame goes through
 ``Fusion.step``, the very code the live ``fusion_node`` runs, so both give the same tracks for
 the same inputs. ``--smooth offline`` runs fusion without the causal filter and then applies
-the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``).
+the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``)
+and, knowing the whole sequence, settles track states: a track that is ever confirmed is
+reported as confirmed from its first frame on, and a track never confirmed is left out
+(``settle_states``).
 
 Output: JSON Lines, one line per frame (``io.tracks_jsonl``), including tentative tracks and
 one DELETED tombstone per ended track; consumers pick the states they want.
@@ -173,6 +176,30 @@ def run_fusion(fusion, seq, fps: float, progress: bool = False
             bar.close()
 
 
+def settle_states(frames: List[list]) -> List[list]:
+    """
+    Settle track states with hindsight, for batch output.
+
+    Live, a track is TENTATIVE for its first frames (``confirm_hits``); offline the future is
+    known, so a track that is ever CONFIRMED is confirmed from its first frame, and a track that
+    never is (a ghost) is dropped with its tombstone. Other states are kept.
+    """
+    from mv3dpose_ros.core.types import TrackState
+    confirmed = {t.track_id for tracks in frames for t in tracks
+                 if t.state == TrackState.CONFIRMED}
+    settled = []
+    for tracks in frames:
+        kept = []
+        for t in tracks:
+            if t.track_id not in confirmed:
+                continue
+            if t.state == TrackState.TENTATIVE:
+                t = dataclasses.replace(t, state=TrackState.CONFIRMED)
+            kept.append(t)
+        settled.append(kept)
+    return settled
+
+
 def run(args) -> int:
     """Track, write the JSON Lines file, print a summary; return the exit code."""
     from mv3dpose_ros.core.calibration import CalibrationError
@@ -218,6 +245,7 @@ def run(args) -> int:
                 done = list(frames)
                 smoothed = smooth_track_sequence([t for _, _, t in done], args.sigma_frames,
                                                  args.max_gap_frames, layout.root_joints)
+                smoothed = settle_states(smoothed)
                 frames = ((f, s, t) for (f, s, _), t in zip(done, smoothed))
             for frame, stamp, tracks in frames:
                 writer.write(frame, tracks, stamp)
