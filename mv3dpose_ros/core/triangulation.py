@@ -104,29 +104,29 @@ def dlt_basis(projections: np.ndarray) -> np.ndarray:
     return basis.reshape(len(projections) * 4, 16).T.copy()
 
 
+# Cramer's rule on the symmetric 3x3 block ``a`` of the 4x4 normal matrix (row-major rows of
+# ``dlt_basis``: a00 = 0, a01 = 1, a02 = 2, a11 = 5, a12 = 6, a22 = 10; right side -(3, 7, 11)).
+# Cofactors c00, c01, c02, c11, c12, c22 = g0 * g1 - g2 * g3 with g = m[_COFACTOR_ROWS]: one
+# gather and three products instead of thirty small ones.
+_COFACTOR_ROWS = np.array([[5, 2, 1, 0, 1, 0], [10, 6, 6, 10, 2, 5],
+                           [6, 1, 2, 2, 0, 1], [6, 10, 5, 2, 6, 1]])
+_COFACTOR_OF = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])     # [i, j] -> index of c_ij
+
+
 def _normal_solve(u: np.ndarray, v: np.ndarray, w: np.ndarray, basis: np.ndarray,
                   enough: np.ndarray) -> np.ndarray:
     """Solve the weighted DLT normal equations of all joints; return ``[3, K, J]`` (NaN: fail)."""
     c, k, j = w.shape
     coef = np.stack([w * (u * u + v * v), w * u, w * v, w], axis=1)      # [C, 4, K, J]
     m = basis @ coef.reshape(c * 4, k * j)                               # [16, K*J]
-    a00, a01, a02, b0 = m[0], m[1], m[2], -m[3]
-    a11, a12, b1 = m[5], m[6], -m[7]
-    a22, b2 = m[10], -m[11]
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    c11 = a00 * a22 - a02 * a02
-    c12 = a01 * a02 - a00 * a12
-    c22 = a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    trace = a00 + a11 + a22
+    g = m[_COFACTOR_ROWS]
+    cof = g[0] * g[1] - g[2] * g[3]                                      # [6, K*J]
+    det = (m[:3] * cof[:3]).sum(axis=0)
+    trace = m[0] + m[5] + m[10]
     with np.errstate(invalid='ignore', divide='ignore'):
         ok = enough.ravel() & (np.abs(det) > 1e-12 * trace * trace * trace)
         inv = np.where(ok, 1.0 / det, np.nan)
-    x = np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
-                  (c01 * b0 + c11 * b1 + c12 * b2) * inv,
-                  (c02 * b0 + c12 * b1 + c22 * b2) * inv])
+    x = (cof[_COFACTOR_OF] * -m[3:12:4]).sum(axis=1) * inv
     return x.reshape(3, k, j)
 
 
@@ -143,7 +143,12 @@ def triangulate_dlt(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np
         basis = dlt_basis(projections)
     seen = w > 0
     u, v, w = np.where(seen, u, 0.0), np.where(seen, v, 0.0), np.where(seen, w, 0.0)
-    enough = seen.sum(axis=0) >= 2
+    return _dlt(u, v, w, projections, basis, seen.sum(axis=0) >= 2, reweight)
+
+
+def _dlt(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np.ndarray,
+         basis: np.ndarray, enough: np.ndarray, reweight: bool = True) -> np.ndarray:
+    """Run ``triangulate_dlt`` on finite ``u, v`` with ``w`` = 0 where unseen (no cleaning)."""
     x = _normal_solve(u, v, w, basis, enough)
     if reweight:
         depth = _depth(x, projections)
@@ -203,22 +208,23 @@ def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections:
         basis = dlt_basis(projections)
     used = (w > 0) & np.isfinite(u) & np.isfinite(v)
     observed = used
-    w = np.where(used, w, 0.0)
-    x = triangulate_dlt(u, v, w, projections, basis=basis)
+    # Cleaned once for both solves: a dropped view keeps finite u, v and gets w = 0.
+    u0, v0, w = np.where(used, u, 0.0), np.where(used, v, 0.0), np.where(used, w, 0.0)
+    nviews = used.sum(axis=0)
+    x = _dlt(u0, v0, w, projections, basis, nviews >= 2)
     err, depth = _errors(x, u, v, projections)
     err_used = np.where(used, err, -1.0)
     worst = err_used.max(axis=0)                                     # [K, J]
-    nviews = used.sum(axis=0)
     gated = worst > gate
     retry = gated & (nviews >= 3)
     if retry.any():
         drop = (err_used == worst) & retry
         w = np.where(drop, 0.0, w)
         used = used & ~drop
-        x = np.where(retry, triangulate_dlt(u, v, w, projections, basis=basis), x)
+        nviews = used.sum(axis=0)
+        x = np.where(retry, _dlt(u0, v0, w, projections, basis, nviews >= 2), x)
         err, depth = _errors(x, u, v, projections)
         err_used = np.where(used, err, -1.0)
-        nviews = used.sum(axis=0)
     with np.errstate(invalid='ignore'):
         bad = (err_used.max(axis=0) > gate) | (used & ~(depth > 0)).any(axis=0) \
             | (nviews < min_views) | np.isnan(x[0])
@@ -307,17 +313,16 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
     sc, sk, sf = (np.asarray(i, dtype=int) for i in suspects)
     if len(sc) == 0:
         return out
-    ja, jb = fp[sf, 0], fp[sf, 1]                                        # [S]
+    jab = fp[sf]                                                         # [S, 2]
     refs = ref_cams[:, sk].T                                             # [S, R]
     rc = np.maximum(refs, 0)
-    kk = sk[:, None]
-
-    def points(c, k, j):
-        return np.stack([u[c, k, j], v[c, k, j], np.ones(np.shape(u[c, k, j]))], axis=-1)
-
-    # labels (a, b) of the suspect view and of each reference: [S, 1, 2, 3] and [S, R, 2, 3]
-    xp = np.stack([points(sc, sk, ja), points(sc, sk, jb)], axis=1)[:, None]
-    xr = np.stack([points(rc, kk, ja[:, None]), points(rc, kk, jb[:, None])], axis=2)
+    # labels (a, b) of the suspect view and of each reference: [S, 1, 2, 3] and [S, R, 2, 3],
+    # gathered from the homogeneous points in one go each
+    xh = np.stack([u, v, np.ones_like(u)], axis=-1)                      # [C, K, J, 3]
+    at_p = (sc[:, None], sk[:, None], jab)
+    at_r = (rc[..., None], sk[:, None, None], jab[:, None, :])
+    xp = xh[at_p][:, None]
+    xr = xh[at_r]
     e = essentials[rc, sc[:, None]]                                      # [S, R, 3, 3]
     lines_p = xr @ np.swapaxes(e, -1, -2)            # in the suspect view, of the references
     lines_r = xp @ e                                 # in the references, of the suspect
@@ -325,17 +330,15 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
     with np.errstate(invalid='ignore', divide='ignore'):
         inv_p = 1.0 / np.hypot(lines_p[..., 0], lines_p[..., 1])         # [S, R, j]
         inv_r = 1.0 / np.hypot(lines_r[..., 0], lines_r[..., 1])         # [S, R, i]
-        d_same = alg[..., 0, 0] * (inv_p[..., 0] + inv_r[..., 0]) \
-            + alg[..., 1, 1] * (inv_p[..., 1] + inv_r[..., 1])
-        d_cross = alg[..., 0, 1] * (inv_p[..., 1] + inv_r[..., 0]) \
-            + alg[..., 1, 0] * (inv_p[..., 0] + inv_r[..., 1])
-        seen = (w[rc, kk, ja[:, None]] > 0) & (w[rc, kk, jb[:, None]] > 0)
-        valid = (refs >= 0) & (refs != sc[:, None]) & seen \
+        # d[i, j]: symmetric distance of label i of the suspect to label j of the reference
+        d = alg * (inv_p[..., None, :] + inv_r[..., :, None])
+        d_same = d[..., 0, 0] + d[..., 1, 1]
+        d_cross = d[..., 0, 1] + d[..., 1, 0]
+        valid = (refs >= 0) & (refs != sc[:, None]) & (w[at_r] > 0).all(axis=-1) \
             & np.isfinite(d_same) & np.isfinite(d_cross)
         better = valid & (d_cross < ratio * d_same)
     n_ok, n_better = valid.sum(axis=1), better.sum(axis=1)
-    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w[sc, sk, ja] > 0) \
-        & (w[sc, sk, jb] > 0)
+    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w[at_p] > 0).all(axis=-1)
     return out
 
 
