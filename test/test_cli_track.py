@@ -41,7 +41,7 @@ def pose2sim(shared_data, tmp_path_factory):
     out = str(tmp_path_factory.mktemp('track') / 'tracks.jsonl')
     args = ['track', '--calibration', os.path.join(root, 'Calib_qualisys.toml'),
             '--poses', os.path.join(root, 'pose'), '--layout', 'body25b',
-            '--fps', str(FPS), '--output', out, '--no-progress']
+            '--fps', str(FPS), '--smooth', 'causal', '--output', out, '--no-progress']
     assert cli.main(args) == 0
     return root, out
 
@@ -178,7 +178,11 @@ def test_settle_states_confirms_early_frames_and_drops_ghosts():
     frames = [[_stub_track(1, S.TENTATIVE), _stub_track(2, S.TENTATIVE)],
               [_stub_track(1, S.TENTATIVE), _stub_track(2, S.DELETED)],
               [_stub_track(1, S.CONFIRMED)],
-              [_stub_track(1, S.COASTING)]]
+              [_stub_track(1, S.COASTING)],      # a gap: kept
+              [_stub_track(1, S.CONFIRMED)],
+              [_stub_track(1, S.COASTING)],      # after the last observation: dropped
+              [_stub_track(1, S.DELETED)]]
     settled = settle_states(frames)
     assert [[(t.track_id, t.state) for t in f] for f in settled] == [
-        [(1, S.CONFIRMED)], [(1, S.CONFIRMED)], [(1, S.CONFIRMED)], [(1, S.COASTING)]]
+        [(1, S.CONFIRMED)], [(1, S.CONFIRMED)], [(1, S.CONFIRMED)], [(1, S.COASTING)],
+        [(1, S.CONFIRMED)], [], [(1, S.DELETED)]]

@@ -99,7 +99,8 @@ def test_pose2sim_bag_replay_gives_the_tracks_of_mv3dpose_track(
     expected = tmp_path / 'track.jsonl'
     proc = subprocess.run(CLI + ['track', '--calibration', calib, '--poses',
                                  os.path.join(root, 'pose'), '--layout', 'body25b', '--fps',
-                                 str(fps), '-o', str(expected), '--no-progress'],
+                                 str(fps), '--smooth', 'causal', '-o', str(expected),
+                                 '--no-progress'],
                           capture_output=True, text=True, timeout=200)
     assert proc.returncode == 0, proc.stderr
 

@@ -69,9 +69,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'test frames for campus, else every ground-truth frame)')
     parser.add_argument('--frame-offset', type=int, default=0,
                         help='tracks frame = ground-truth frame + offset (default 0)')
-    parser.add_argument('--states', default='confirmed',
-                        help='comma-separated track states counted as predictions '
-                             '(default: confirmed; also tentative, coasting)')
+    parser.add_argument('--states', default='confirmed,coasting',
+                        help='comma-separated track states counted as predictions (default: '
+                             'confirmed,coasting: every track the tracker believes in; '
+                             'also tentative)')
     parser.add_argument('--threshold-m', type=float, default=0.5,
                         help='match distance for MOT and MPJPE, metres (default 0.5)')
     parser.add_argument('--mot-distance', choices=('mean_joint', 'root'), default='mean_joint',

@@ -20,8 +20,9 @@ Input: a calibration file (any format ``core.calibration`` reads) and a folder `
 one sub-folder of OpenPose JSON files per camera, named like the camera (loosely: Pose2Sim's
 ``cam01_json`` is camera ``cam_01``). Frames are matched across cameras by the number in the
 file names; frame ``n`` gets the stamp ``n / fps`` seconds. Every frame goes through
-``Fusion.step``, the very code the live ``fusion_node`` runs, so both give the same tracks for
-the same inputs. ``--smooth offline`` runs fusion without the causal filter and then applies
+``Fusion.step``, the very code the live ``fusion_node`` runs; with ``--smooth causal`` both give
+the same tracks for the same inputs. ``--smooth offline`` (the default for this batch command,
+as in the paper) runs fusion without the causal filter and then applies
 the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``)
 and, knowing the whole sequence, settles track states: a track that is ever confirmed is
 reported as confirmed from its first frame on, and a track never confirmed is left out
@@ -57,9 +58,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="tracks JSON Lines file ('-' = standard output)")
     parser.add_argument('--fps', type=float, default=30.0,
                         help='frame rate: frame n has stamp n / fps seconds (default 30)')
-    parser.add_argument('--smooth', choices=('causal', 'offline', 'none'), default='causal',
-                        help='causal: the live filter (default); offline: Gaussian smoothing '
-                             'of whole tracks; none: raw triangulation')
+    parser.add_argument('--smooth', choices=('causal', 'offline', 'none'), default='offline',
+                        help="offline (default): the paper's Gaussian smoothing of whole "
+                             'tracks and states settled with hindsight; causal: the live '
+                             'filter, output identical to fusion_node; none: raw triangulation')
     parser.add_argument('--sigma-frames', type=float, default=2.0,
                         help='Gaussian sigma in frames for --smooth offline (paper: 2)')
     parser.add_argument('--max-gap-frames', type=int, default=10,
@@ -180,18 +182,25 @@ def settle_states(frames: List[list]) -> List[list]:
     """
     Settle track states with hindsight, for batch output.
 
-    Live, a track is TENTATIVE for its first frames (``confirm_hits``); offline the future is
-    known, so a track that is ever CONFIRMED is confirmed from its first frame, and a track that
-    never is (a ghost) is dropped with its tombstone. Other states are kept.
+    Live, a track is TENTATIVE for its first frames (``confirm_hits``) and COASTING on
+    predictions after it was last seen; offline the future is known, so a track that is ever
+    CONFIRMED is confirmed from its first frame, its coasting after its last observation
+    (predictions of a person hindsight says was lost) is dropped, and a track never confirmed
+    (a ghost) is dropped with its tombstone. Coasting inside a track (a gap) is kept.
     """
     from mv3dpose_ros.core.types import TrackState
-    confirmed = {t.track_id for tracks in frames for t in tracks
-                 if t.state == TrackState.CONFIRMED}
+    last_seen = {}
+    for k, tracks in enumerate(frames):
+        for t in tracks:
+            if t.state == TrackState.CONFIRMED:
+                last_seen[t.track_id] = k
     settled = []
-    for tracks in frames:
+    for k, tracks in enumerate(frames):
         kept = []
         for t in tracks:
-            if t.track_id not in confirmed:
+            if t.track_id not in last_seen:
+                continue
+            if t.state == TrackState.COASTING and k > last_seen[t.track_id]:
                 continue
             if t.state == TrackState.TENTATIVE:
                 t = dataclasses.replace(t, state=TrackState.CONFIRMED)
