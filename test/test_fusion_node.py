@@ -45,6 +45,7 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
@@ -352,6 +353,25 @@ def test_bad_inputs_dropped_counted_and_tracking_continues(harness_factory, scen
     values = {kv.key: kv.value for kv in h.latest_status(f'{cam} input').values}
     for reason, n in expected.items():
         assert values[f'rejected: {reason}'] == str(n)
+
+
+def test_raw_input_malformed_dropped_and_lenient_bytes_read_by_rclpy(harness_factory, scene):
+    """Truncated CDR is dropped as 'malformed'; bytes only rclpy reads still count as input."""
+    h = harness_factory()
+    cam = 'cam_02'
+    msgs = {c: m for c, m, _ in stream(scene, base_ns(10), [0])}
+    data = serialize_message(msgs[cam])
+    h.publish(cam, data[:len(data) // 2])
+    assert h.spin_until(lambda: h.node.cams[cam].rejected['malformed'] == 1, 5.0)
+    h.publish(cam, data + bytes(8))            # trailing bytes: the fast decoder refuses
+    for c, m in msgs.items():
+        if c != cam:
+            h.publish(c, m)
+    assert h.wait_sets(1)
+    st = h.node.cams[cam]
+    assert (st.received, st.accepted, st.decoded_by_rclpy) == (2, 1, 1)
+    assert dict(st.rejected) == {'malformed': 1}
+    assert h.node.counts['partial_sets'] == 0   # the set used cam_02's message
 
 
 def test_fusion_node_process_matches_fusion_step(scene, rig_path, tmp_path):

@@ -31,7 +31,7 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import load_calibration
@@ -45,8 +45,9 @@ from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, le
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
 from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers
-from mv3dpose_ros.ros.messages import (InvalidMessage, ns_to_stamp, person2d_array_to_numpy,
-                                       skeleton_info_msg, stamp_to_ns, tracks_to_msg)
+from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns_to_stamp,
+                                       person2d_array_to_numpy, Persons2D, skeleton_info_msg,
+                                       stamp_to_ns, tracks_to_msg)
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
 import numpy as np
@@ -57,6 +58,7 @@ from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
@@ -79,6 +81,7 @@ class _Camera:
         self.accepted = 0
         self.rejected: Counter = Counter()     # reason -> count (never reset)
         self.rejected_reported: Counter = Counter()   # snapshot at the last diagnostics cycle
+        self.decoded_by_rclpy = 0              # CDR the fast decoder refused but rclpy read
         self.freq = FrequencyStats()
         self.stamps = TimestampStats()
         self.last_rx_ns: Optional[int] = None
@@ -146,9 +149,10 @@ class FusionNode(Node):
             topic = self._topic(self.input_topic, cam, 'input_topic')
             state = _Camera(cam, self.resolve_topic_name(topic))
             self.cams[cam] = state
+            # raw=True: CDR bytes decoded by decode_person2d_array (no object per keypoint).
             self._subs.append(self.create_subscription(
                 Person2DArray, topic, lambda msg, c=cam: self._on_persons(c, msg), in_qos,
-                event_callbacks=subscription_events(self, topic, in_qos)))
+                event_callbacks=subscription_events(self, topic, in_qos), raw=True))
             self.get_logger().info(f'input {cam}: {state.topic} [{describe(in_qos)}]')
         if self.intrinsics_source == 'camera_info':
             info_qos = sensor_qos('best_effort', 1)
@@ -405,7 +409,20 @@ class FusionNode(Node):
         self._rlog(f'{state.name}:{reason}', f'dropped Person2DArray of camera {state.name} '
                    f'on {state.topic}: {text}', now_ns)
 
-    def _validate(self, state: _Camera, msg: Person2DArray, stamp_ns: int, now_ns: int):
+    def _decode(self, state: _Camera, data: bytes) -> Union[Persons2D, Person2DArray]:
+        """Decode raw CDR; on refusal let rclpy try (InvalidMessage 'malformed' if it fails)."""
+        try:
+            return decode_person2d_array(data)
+        except InvalidMessage as exc:
+            try:
+                msg = deserialize_message(bytes(data), Person2DArray)
+            except Exception:  # noqa: B902 - rclpy raises RMWError and friends
+                raise exc from None
+            state.decoded_by_rclpy += 1
+            return msg
+
+    def _validate(self, state: _Camera, msg: Union[Persons2D, Person2DArray], stamp_ns: int,
+                  now_ns: int):
         """Return ``(poses, None)`` or ``(None, (reason, text))``."""
         cam = state.name
         if msg.camera_id and msg.camera_id != cam:
@@ -439,11 +456,7 @@ class FusionNode(Node):
         try:
             poses = person2d_array_to_numpy(msg, src.num_joints)
         except InvalidMessage as exc:
-            text = str(exc)
-            reason = ('non_finite' if 'NaN' in text else
-                      'confidence_range' if 'confidence' in text else
-                      'keypoint_count' if 'keypoint' in text else 'invalid')
-            return None, (reason, text)
+            return None, (exc.reason, str(exc))
         if src.name != self.layout.name and len(poses):
             poses = convert_poses(poses, src, self.layout)
             bad = ~np.isfinite(poses).all(axis=-1)
@@ -454,7 +467,8 @@ class FusionNode(Node):
             poses = poses.reshape(0, self.layout.num_joints, 3)
         return poses, None
 
-    def _on_persons(self, cam: str, msg: Person2DArray) -> None:
+    def _on_persons(self, cam: str, msg: Union[bytes, Person2DArray]) -> None:
+        """Take one input: serialised CDR (the raw subscription) or a ``Person2DArray``."""
         with self._lock:
             now = self._now_ns()
             state = self.cams[cam]
@@ -462,7 +476,16 @@ class FusionNode(Node):
             state.freq.tick()
             state.last_rx_ns = now
             self._last_rx_any_ns = now
-            stamp_ns = stamp_to_ns(msg.header.stamp)
+            if isinstance(msg, Person2DArray):
+                stamp_ns = stamp_to_ns(msg.header.stamp)
+            else:
+                try:
+                    msg = self._decode(state, msg)
+                except InvalidMessage as exc:
+                    self._reject(state, exc.reason, str(exc), now)
+                    return
+                stamp_ns = (msg.stamp_ns if isinstance(msg, Persons2D)
+                            else stamp_to_ns(msg.header.stamp))
             state.stamps.record(stamp_ns, now)
             if self.fusion is None:
                 waiting = [c for c in self.camera_ids if not self.cams[c].camera_info_received]
@@ -570,6 +593,7 @@ class FusionNode(Node):
                 t_level, t_msg, t_values = st.stamps.sample()
                 values = {'topic': st.topic, **values, **t_values,
                           'received': st.received, 'accepted': st.accepted,
+                          'decoded by rclpy (fallback)': st.decoded_by_rclpy,
                           'used in sets': ss.used, 'dropped by sync': ss.dropped,
                           'late': ss.late, 'missing from sets': ss.missing,
                           'offset mean (ms)': ss.offset_mean_s * 1e3,

@@ -1,0 +1,207 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+CDR fast paths of ``ros/messages.py`` checked against rclpy's own (de)serialisation (no DDS).
+
+The decoder must read exactly what ``rclpy.serialization.serialize_message`` writes, for any
+content, and refuse anything truncated or inconsistent with a 'malformed' ``InvalidMessage``.
+"""
+
+import math
+
+from builtin_interfaces.msg import Time
+from mv3dpose_msgs.msg import Keypoint2D, Person2D, Person2DArray
+from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage,
+                                       person2d_array_to_numpy, Persons2D)
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import RegionOfInterest
+from std_msgs.msg import Header
+
+ALPHABET = ['', 'a', 'cam_01', 'coco17', 'é', 'カメラ', '🙂x', 'Ω' * 7, 'left wrist']
+
+
+def _text(rng):
+    return ''.join(rng.choice(ALPHABET) for _ in range(rng.integers(0, 4)))
+
+
+def _float32(rng):
+    special = [0.0, -0.0, 1.0, float('nan'), float('inf'), -float('inf'), 3.4e38, 1e-45]
+    if rng.random() < 0.1:
+        return special[rng.integers(len(special))]
+    return float(np.float32(rng.normal(0, 500)))
+
+
+def random_person2d_array(rng) -> Person2DArray:
+    """Return a random ``Person2DArray``: any content, including empty and odd-length parts."""
+    msg = Person2DArray(
+        header=Header(stamp=Time(sec=int(rng.integers(-2**31, 2**31)),
+                                 nanosec=int(rng.integers(0, 10**9))), frame_id=_text(rng)),
+        camera_id=_text(rng), image_width=int(rng.integers(0, 2**32)),
+        image_height=int(rng.integers(0, 2**32)), layout=_text(rng))
+    same = int(rng.integers(0, 20))
+    for _ in range(rng.integers(0, 7)):
+        count = same if rng.random() < 0.8 else int(rng.integers(0, 30))
+        msg.persons.append(Person2D(
+            roi=RegionOfInterest(x_offset=int(rng.integers(0, 2**32)),
+                                 y_offset=int(rng.integers(0, 5000)),
+                                 height=int(rng.integers(0, 5000)),
+                                 width=int(rng.integers(0, 2**32)),
+                                 do_rectify=bool(rng.random() < 0.5)),
+            score=_float32(rng), id=_text(rng),
+            keypoints=[Keypoint2D(x=_float32(rng), y=_float32(rng), confidence=_float32(rng))
+                       for _ in range(count)]))
+    return msg
+
+
+def _bits(values):
+    return np.asarray(values, dtype=np.float32).view(np.uint32)
+
+
+def assert_same(decoded: Persons2D, msg: Person2DArray) -> None:
+    """Every field of ``decoded`` equals ``msg`` (floats bit for bit, NaN included)."""
+    assert isinstance(decoded, Persons2D)
+    stamp = msg.header.stamp
+    assert decoded.stamp_ns == stamp.sec * 1_000_000_000 + stamp.nanosec
+    assert decoded.frame_id == msg.header.frame_id
+    assert (decoded.camera_id, decoded.layout) == (msg.camera_id, msg.layout)
+    assert (decoded.image_width, decoded.image_height) == (msg.image_width, msg.image_height)
+    assert decoded.counts.tolist() == [len(p.keypoints) for p in msg.persons]
+    flat = [(k.x, k.y, k.confidence) for p in msg.persons for k in p.keypoints]
+    assert decoded.keypoints.shape == (len(flat), 3)
+    assert decoded.keypoints.dtype == np.float32
+    np.testing.assert_array_equal(_bits(decoded.keypoints).reshape(-1), _bits(flat).reshape(-1))
+    assert decoded.rois.tolist() == [[p.roi.x_offset, p.roi.y_offset, p.roi.height,
+                                      p.roi.width, int(p.roi.do_rectify)] for p in msg.persons]
+    np.testing.assert_array_equal(_bits(decoded.scores), _bits([p.score for p in msg.persons]))
+    assert decoded.ids == [p.id for p in msg.persons]
+
+
+def test_decoder_reads_what_rclpy_writes_for_random_messages():
+    rng = np.random.default_rng(2026)
+    shapes = set()
+    for _ in range(300):
+        msg = random_person2d_array(rng)
+        data = serialize_message(msg)
+        assert_same(decode_person2d_array(data), deserialize_message(data, Person2DArray))
+        shapes.add(len(msg.persons))
+    assert 0 in shapes and max(shapes) >= 5
+
+
+def test_decoder_empty_and_unicode_message():
+    msg = Person2DArray(camera_id='カメラ_01', layout='', header=Header(frame_id='🙂'))
+    decoded = decode_person2d_array(serialize_message(msg))
+    assert_same(decoded, msg)
+    assert person2d_array_to_numpy(decoded, 17).shape == (0, 17, 3)
+
+
+def test_decoder_reads_big_endian_cdr():
+    from mv3dpose_ros.io.bag import get_typestore
+    store = get_typestore()
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        msg = random_person2d_array(rng)
+        obj = store.deserialize_cdr(serialize_message(msg), 'mv3dpose_msgs/msg/Person2DArray')
+        data = bytes(store.serialize_cdr(obj, 'mv3dpose_msgs/msg/Person2DArray',
+                                         little_endian=False))
+        assert data[:2] == b'\x00\x00'
+        assert_same(decode_person2d_array(data), msg)
+
+
+def test_every_truncation_is_rejected_as_malformed():
+    rng = np.random.default_rng(11)
+    for _ in range(10):
+        msg = random_person2d_array(rng)
+        data = serialize_message(msg)
+        for cut in range(len(data)):
+            with pytest.raises(InvalidMessage, match='malformed Person2DArray CDR') as info:
+                decode_person2d_array(data[:cut])
+            assert info.value.reason == 'malformed'
+
+
+def _valid_message():
+    kps = [Keypoint2D(x=float(i), y=2.0 * i, confidence=0.5) for i in range(17)]
+    return Person2DArray(camera_id='cam0', layout='coco17',
+                         persons=[Person2D(id='p', keypoints=kps) for _ in range(3)])
+
+
+def test_inconsistent_bytes_are_rejected_with_the_reason():
+    data = bytearray(serialize_message(_valid_message()))
+    # persons count (after header 4+8+4+1 -> 20, camera_id 4+5 -> 29, pad -> 32, sizes 8,
+    # layout 4+7 -> 51, pad -> 52): a huge count fails at once instead of looping.
+    huge = bytearray(data)
+    huge[52:56] = (2**31).to_bytes(4, 'little')
+    with pytest.raises(InvalidMessage, match='persons cannot fit'):
+        decode_person2d_array(bytes(huge))
+    with pytest.raises(InvalidMessage, match='bytes after the last person'):
+        decode_person2d_array(bytes(data) + bytes(8))
+    with pytest.raises(InvalidMessage, match='expected plain CDR'):
+        decode_person2d_array(b'\x00\x07\x00\x00' + bytes(data[4:]))      # XCDR2
+    with pytest.raises(InvalidMessage, match='encapsulation none'):
+        decode_person2d_array(b'')
+    not_nul = bytearray(data)
+    not_nul[28] = ord('x')                      # camera_id's terminating NUL
+    with pytest.raises(InvalidMessage, match='not NUL-terminated'):
+        decode_person2d_array(bytes(not_nul))
+    bad_utf8 = bytearray(data)
+    bad_utf8[24] = 0xff                          # first byte of camera_id
+    with pytest.raises(InvalidMessage, match='not UTF-8'):
+        decode_person2d_array(bytes(bad_utf8))
+    # rclpy refuses the impossible count (the node drops it as malformed) but is lenient with
+    # the string problems and trailing bytes: the node then uses rclpy's reading instead.
+    with pytest.raises(Exception, match='deserialize'):
+        deserialize_message(bytes(huge), Person2DArray)
+    assert deserialize_message(bytes(not_nul), Person2DArray).camera_id == 'cam0x'
+    assert deserialize_message(bytes(data) + bytes(8), Person2DArray).camera_id == 'cam0'
+
+
+@pytest.mark.parametrize('kind,reason', [('count', 'keypoint_count'), ('nan', 'non_finite'),
+                                         ('inf', 'non_finite'),
+                                         ('negative', 'confidence_range'),
+                                         ('above_one', 'confidence_range')])
+def test_bad_content_gives_the_same_reason_from_bytes_and_from_messages(kind, reason):
+    msg = _valid_message()
+    kps = msg.persons[1].keypoints
+    if kind == 'count':
+        msg.persons[1].keypoints = kps[:16]
+    elif kind == 'nan':
+        kps[3].x = math.nan
+    elif kind == 'inf':
+        kps[4].y = -math.inf
+    elif kind == 'negative':
+        kps[5].confidence = -0.25
+    else:
+        kps[6].confidence = 1.5
+    decoded = decode_person2d_array(serialize_message(msg))
+    for source in (msg, decoded):
+        with pytest.raises(InvalidMessage) as info:
+            person2d_array_to_numpy(source, 17)
+        assert info.value.reason == reason
+
+
+def test_poses_from_bytes_equal_poses_from_the_deserialised_message():
+    rng = np.random.default_rng(3)
+    msg = _valid_message()
+    for p in msg.persons:
+        for k in p.keypoints:
+            k.x, k.y = (float(v) for v in rng.uniform(0, 1920, 2))
+            k.confidence = float(rng.choice([0.0, rng.uniform(0, 1)]))
+    data = serialize_message(msg)
+    fast = person2d_array_to_numpy(decode_person2d_array(data), 17)
+    slow = person2d_array_to_numpy(deserialize_message(data, Person2DArray), 17)
+    assert fast.dtype == slow.dtype == np.float64
+    np.testing.assert_array_equal(fast, slow)
+    assert np.all(fast[fast[..., 2] == 0.0][:, :2] == 0.0)
