@@ -104,6 +104,11 @@ def dlt_basis(projections: np.ndarray) -> np.ndarray:
     return basis.reshape(len(projections) * 4, 16).T.copy()
 
 
+def _dlt_terms(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Return ``[C, 4, K, J]`` = ``(u^2 + v^2, u, v, 1)``: the weight-free DLT coefficients."""
+    return np.stack([u * u + v * v, u, v, np.ones_like(u)], axis=1)
+
+
 # Cramer's rule on the symmetric 3x3 block ``a`` of the 4x4 normal matrix (row-major rows of
 # ``dlt_basis``: a00 = 0, a01 = 1, a02 = 2, a11 = 5, a12 = 6, a22 = 10; right side -(3, 7, 11)).
 # Cofactors c00, c01, c02, c11, c12, c22 = g0 * g1 - g2 * g3 with g = m[_COFACTOR_ROWS]: one
@@ -113,19 +118,17 @@ _COFACTOR_ROWS = np.array([[5, 2, 1, 0, 1, 0], [10, 6, 6, 10, 2, 5],
 _COFACTOR_OF = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])     # [i, j] -> index of c_ij
 
 
-def _normal_solve(u: np.ndarray, v: np.ndarray, w: np.ndarray, basis: np.ndarray,
+def _normal_solve(terms: np.ndarray, w: np.ndarray, basis: np.ndarray,
                   enough: np.ndarray) -> np.ndarray:
     """Solve the weighted DLT normal equations of all joints; return ``[3, K, J]`` (NaN: fail)."""
-    c, k, j = w.shape
-    coef = np.stack([w * (u * u + v * v), w * u, w * v, w], axis=1)      # [C, 4, K, J]
-    m = basis @ coef.reshape(c * 4, k * j)                               # [16, K*J]
+    c, _, k, j = terms.shape
+    m = basis @ (terms * w[:, None]).reshape(c * 4, k * j)              # [16, K*J]
     g = m[_COFACTOR_ROWS]
     cof = g[0] * g[1] - g[2] * g[3]                                      # [6, K*J]
     det = (m[:3] * cof[:3]).sum(axis=0)
     trace = m[0] + m[5] + m[10]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        ok = enough.ravel() & (np.abs(det) > 1e-12 * trace * trace * trace)
-        inv = np.where(ok, 1.0 / det, np.nan)
+    ok = enough.ravel() & (np.abs(det) > 1e-12 * trace * trace * trace)
+    inv = np.where(ok, 1.0 / det, np.nan)
     x = (cof[_COFACTOR_OF] * -m[3:12:4]).sum(axis=1) * inv
     return x.reshape(3, k, j)
 
@@ -142,19 +145,20 @@ def triangulate_dlt(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np
     if basis is None:
         basis = dlt_basis(projections)
     seen = w > 0
-    u, v, w = np.where(seen, u, 0.0), np.where(seen, v, 0.0), np.where(seen, w, 0.0)
-    return _dlt(u, v, w, projections, basis, seen.sum(axis=0) >= 2, reweight)
+    terms = _dlt_terms(np.where(seen, u, 0.0), np.where(seen, v, 0.0))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return _dlt(terms, np.where(seen, w, 0.0), projections, basis, seen.sum(axis=0) >= 2,
+                    reweight)
 
 
-def _dlt(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np.ndarray,
-         basis: np.ndarray, enough: np.ndarray, reweight: bool = True) -> np.ndarray:
-    """Run ``triangulate_dlt`` on finite ``u, v`` with ``w`` = 0 where unseen (no cleaning)."""
-    x = _normal_solve(u, v, w, basis, enough)
+def _dlt(terms: np.ndarray, w: np.ndarray, projections: np.ndarray, basis: np.ndarray,
+         enough: np.ndarray, reweight: bool = True) -> np.ndarray:
+    """Run ``triangulate_dlt`` on ``_dlt_terms`` of finite points, ``w`` = 0 where unseen."""
+    x = _normal_solve(terms, w, basis, enough)
     if reweight:
         depth = _depth(x, projections)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            w2 = np.where(depth > 1e-6, w / (depth * depth), 0.0)
-        x2 = _normal_solve(u, v, w2, basis, enough)
+        w2 = np.where(depth > 1e-6, w / (depth * depth), 0.0)
+        x2 = _normal_solve(terms, w2, basis, enough)
         x = np.where(np.isfinite(x2), x2, x)
     return x
 
@@ -169,11 +173,16 @@ def _depth(x: np.ndarray, projections: np.ndarray) -> np.ndarray:
 def reproject(x: np.ndarray, projections: np.ndarray
               ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Project points ``x [3, K, J]`` into all cameras: ``(u, v, depth)``, each ``[C, K, J]``."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return _reproject(x, projections)
+
+
+def _reproject(x: np.ndarray, projections: np.ndarray
+               ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     k, j = x.shape[1:]
     cam = (projections[:, :, :3] @ x.reshape(3, k * j)).reshape(len(projections), 3, k, j) \
         + projections[:, :, 3, None, None]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        inv = 1.0 / cam[:, 2]
+    inv = 1.0 / cam[:, 2]
     return cam[:, 0] * inv, cam[:, 1] * inv, cam[:, 2]
 
 
@@ -206,12 +215,19 @@ def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections:
     """
     if basis is None:
         basis = dlt_basis(projections)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return _triangulate_robust(u, v, w, projections, focal_px, gate, min_views, basis)
+
+
+def _triangulate_robust(u, v, w, projections, focal_px, gate, min_views, basis):
+    """Run ``triangulate_robust`` (inside one errstate: NaN marks missing data throughout)."""
     used = (w > 0) & np.isfinite(u) & np.isfinite(v)
     observed = used
-    # Cleaned once for both solves: a dropped view keeps finite u, v and gets w = 0.
-    u0, v0, w = np.where(used, u, 0.0), np.where(used, v, 0.0), np.where(used, w, 0.0)
+    # Cleaned once for all solves: a dropped view keeps finite u, v and gets w = 0.
+    terms = _dlt_terms(np.where(used, u, 0.0), np.where(used, v, 0.0))
+    w = np.where(used, w, 0.0)
     nviews = used.sum(axis=0)
-    x = _dlt(u0, v0, w, projections, basis, nviews >= 2)
+    x = _dlt(terms, w, projections, basis, nviews >= 2)
     err, depth = _errors(x, u, v, projections)
     err_used = np.where(used, err, -1.0)
     worst = err_used.max(axis=0)                                     # [K, J]
@@ -222,20 +238,18 @@ def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections:
         w = np.where(drop, 0.0, w)
         used = used & ~drop
         nviews = used.sum(axis=0)
-        x = np.where(retry, _dlt(u0, v0, w, projections, basis, nviews >= 2), x)
+        x = np.where(retry, _dlt(terms, w, projections, basis, nviews >= 2), x)
         err, depth = _errors(x, u, v, projections)
         err_used = np.where(used, err, -1.0)
-    with np.errstate(invalid='ignore'):
-        bad = (err_used.max(axis=0) > gate) | (used & ~(depth > 0)).any(axis=0) \
-            | (nviews < min_views) | np.isnan(x[0])
+    bad = (err_used.max(axis=0) > gate) | (used & ~(depth > 0)).any(axis=0) \
+        | (nviews < min_views) | np.isnan(x[0])
     used = used & ~bad
     nviews = np.where(bad, 0, nviews)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        inv = np.where(bad, np.nan, 1.0 / nviews)
-        err_used = np.where(used, err, 0.0)
-        conf = np.where(bad, 0.0, np.where(used, w, 0.0).sum(axis=0) * inv)
-        err_mean = err_used.sum(axis=0) * inv
-        err_px = (err_used * focal_px[:, None, None]).sum(axis=0) * inv
+    inv = np.where(bad, np.nan, 1.0 / nviews)
+    err_used = np.where(used, err, 0.0)
+    conf = np.where(bad, 0.0, w.sum(axis=0) * inv)                  # w is 0 where not used
+    err_mean = err_used.sum(axis=0) * inv
+    err_px = (err_used * focal_px[:, None, None]).sum(axis=0) * inv
     joints = np.where(bad, np.nan, x).transpose(1, 2, 0)
     return Triangulation(joints=joints, confidence=conf, num_views=nviews, error=err_mean,
                          error_px=err_px, used=used, gated=gated, worst_error=worst,
@@ -245,7 +259,7 @@ def triangulate_robust(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections:
 def _errors(x: np.ndarray, u: np.ndarray, v: np.ndarray,
             projections: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """Return reprojection errors (inf where undefined) and depths, ``[C, K, J]`` each."""
-    pu, pv, depth = reproject(x, projections)
+    pu, pv, depth = _reproject(x, projections)
     err = np.hypot(pu - u, pv - v)
     return np.where(np.isnan(err), np.inf, err), depth
 
