@@ -161,28 +161,3 @@ def test_bad_arguments_fail_with_a_message(tmp_path, capsys):
     os.rename(os.path.join(paths['poses'], 'cam_03'), os.path.join(paths['poses'], 'elsewhere'))
     assert cli.main(base + ['--layout', 'coco17']) == 0          # cam02_json is cam_02
     assert "camera 'cam_03': no folder" in capsys.readouterr().err
-
-
-def _stub_track(track_id, state):
-    from mv3dpose_ros.core.types import Track
-    nan3 = np.full(3, np.nan)
-    return Track(track_id=track_id, state=state, joints=np.zeros((2, 3)), confidence=np.ones(2),
-                 joint_state=np.ones(2, np.uint8), num_views=np.full(2, 2, np.uint8),
-                 reprojection_error=np.zeros(2), position=np.zeros(3), velocity=nan3,
-                 first_seen=0.0, last_observed=0.0)
-
-
-def test_settle_states_confirms_early_frames_and_drops_ghosts():
-    from mv3dpose_ros.commands.track import settle_states
-    from mv3dpose_ros.core.types import TrackState as S
-    frames = [[_stub_track(1, S.TENTATIVE), _stub_track(2, S.TENTATIVE)],
-              [_stub_track(1, S.TENTATIVE), _stub_track(2, S.DELETED)],
-              [_stub_track(1, S.CONFIRMED)],
-              [_stub_track(1, S.COASTING)],      # a gap: kept
-              [_stub_track(1, S.CONFIRMED)],
-              [_stub_track(1, S.COASTING)],      # after the last observation: dropped
-              [_stub_track(1, S.DELETED)]]
-    settled = settle_states(frames)
-    assert [[(t.track_id, t.state) for t in f] for f in settled] == [
-        [(1, S.CONFIRMED)], [(1, S.CONFIRMED)], [(1, S.CONFIRMED)], [(1, S.COASTING)],
-        [(1, S.CONFIRMED)], [], [(1, S.DELETED)]]

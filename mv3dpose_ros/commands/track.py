@@ -24,9 +24,9 @@ file names; frame ``n`` gets the stamp ``n / fps`` seconds. Every frame goes thr
 the same tracks for the same inputs. ``--smooth offline`` (the default for this batch command,
 as in the paper) runs fusion without the causal filter and then applies
 the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``)
-and, knowing the whole sequence, settles track states: a track that is ever confirmed is
-reported as confirmed from its first frame on, and a track never confirmed is left out
-(``settle_states``).
+after settling the run with hindsight (``core.hindsight.settle_tracks``: fragments of one
+person linked into one id, tracks confirmed from their first frame, ghosts and predictions
+after a person's last observation dropped).
 
 Output: JSON Lines, one line per frame (``io.tracks_jsonl``), including tentative tracks and
 one DELETED tombstone per ended track; consumers pick the states they want.
@@ -178,41 +178,11 @@ def run_fusion(fusion, seq, fps: float, progress: bool = False
             bar.close()
 
 
-def settle_states(frames: List[list]) -> List[list]:
-    """
-    Settle track states with hindsight, for batch output.
-
-    Live, a track is TENTATIVE for its first frames (``confirm_hits``) and COASTING on
-    predictions after it was last seen; offline the future is known, so a track that is ever
-    CONFIRMED is confirmed from its first frame, its coasting after its last observation
-    (predictions of a person hindsight says was lost) is dropped, and a track never confirmed
-    (a ghost) is dropped with its tombstone. Coasting inside a track (a gap) is kept.
-    """
-    from mv3dpose_ros.core.types import TrackState
-    last_seen = {}
-    for k, tracks in enumerate(frames):
-        for t in tracks:
-            if t.state == TrackState.CONFIRMED:
-                last_seen[t.track_id] = k
-    settled = []
-    for k, tracks in enumerate(frames):
-        kept = []
-        for t in tracks:
-            if t.track_id not in last_seen:
-                continue
-            if t.state == TrackState.COASTING and k > last_seen[t.track_id]:
-                continue
-            if t.state == TrackState.TENTATIVE:
-                t = dataclasses.replace(t, state=TrackState.CONFIRMED)
-            kept.append(t)
-        settled.append(kept)
-    return settled
-
-
 def run(args) -> int:
     """Track, write the JSON Lines file, print a summary; return the exit code."""
     from mv3dpose_ros.core.calibration import CalibrationError
     from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+    from mv3dpose_ros.core.hindsight import settle_tracks
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.core.smoothing import smooth_track_sequence
     from mv3dpose_ros.core.types import JointState, TrackState
@@ -252,9 +222,13 @@ def run(args) -> int:
             frames = run_fusion(fusion, seq, args.fps, progress)
             if args.smooth == 'offline':
                 done = list(frames)
-                smoothed = smooth_track_sequence([t for _, _, t in done], args.sigma_frames,
+                settled = settle_tracks([t for _, _, t in done], [s for _, s, _ in done],
+                                        max_gap_s=config.max_coast_s)
+                smoothed = smooth_track_sequence(settled, args.sigma_frames,
                                                  args.max_gap_frames, layout.root_joints)
-                smoothed = settle_states(smoothed)
+                # Predictions in gaps too long to interpolate have no joint left: not a pose.
+                smoothed = [[t for t in f if t.state == TrackState.DELETED or t.valid.any()]
+                            for f in smoothed]
                 frames = ((f, s, t) for (f, s, _), t in zip(done, smoothed))
             for frame, stamp, tracks in frames:
                 writer.write(frame, tracks, stamp)
