@@ -22,9 +22,11 @@ content, and refuse anything truncated or inconsistent with a 'malformed' ``Inva
 import math
 
 from builtin_interfaces.msg import Time
-from mv3dpose_msgs.msg import Keypoint2D, Person2D, Person2DArray
-from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage,
-                                       person2d_array_to_numpy, Persons2D)
+from mv3dpose_msgs.msg import Keypoint2D, Person2D, Person2DArray, TrackedSkeletonArray
+from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, message_to_dict,
+                                       ns_to_stamp, person2d_array_to_numpy, Persons2D,
+                                       tracks_to_cdr, tracks_to_msg)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -205,3 +207,51 @@ def test_poses_from_bytes_equal_poses_from_the_deserialised_message():
     assert fast.dtype == slow.dtype == np.float64
     np.testing.assert_array_equal(fast, slow)
     assert np.all(fast[fast[..., 2] == 0.0][:, :2] == 0.0)
+
+
+def _with_specials(rng, values, rate=0.15):
+    values = np.array(values, dtype=np.float64)
+    special = np.array([np.nan, np.inf, -np.inf, -0.0, 1e300])
+    hit = rng.random(values.shape) < rate
+    values[hit] = rng.choice(special, size=int(hit.sum()))
+    return values
+
+
+def random_track(rng, joints) -> Track:
+    """Return a track with random content, including NaN/inf anywhere the core may put them."""
+    return Track(
+        track_id=int(rng.integers(1, 2**63)), state=TrackState(int(rng.integers(0, 4))),
+        joints=_with_specials(rng, rng.normal(0, 3, (joints, 3))),
+        confidence=_with_specials(rng, rng.uniform(-0.5, 1.5, joints)),
+        joint_state=rng.integers(0, 3, joints).astype(np.uint8),
+        num_views=rng.integers(0, 40, joints).astype(np.uint8),
+        reprojection_error=_with_specials(rng, rng.uniform(0, 20, joints)),
+        position=_with_specials(rng, rng.normal(0, 3, 3), 0.2),
+        velocity=_with_specials(rng, rng.normal(0, 1, 3), 0.3),
+        first_seen=float(rng.choice([rng.uniform(-5, 2e9), np.nan, np.inf])),
+        last_observed=float(rng.uniform(0, 2e9)), age=int(rng.integers(0, 2**32)),
+        missed=int(rng.integers(0, 100)), score=float(_with_specials(rng, [rng.random()])[0]),
+        source_cameras=tuple(_text(rng) for _ in range(rng.integers(0, 17))))
+
+
+def test_tracks_to_cdr_equals_serialised_tracks_to_msg():
+    rng = np.random.default_rng(7)
+    for i in range(200):
+        joints = [17] * int(rng.integers(0, 7))
+        if i % 10 == 0:                              # mixed and empty joint counts
+            joints += [int(rng.integers(0, 26)) for _ in range(3)]
+        tracks = [random_track(rng, j) for j in joints]
+        header = Header(stamp=ns_to_stamp(int(rng.integers(0, 2**31 * 10**9))),
+                        frame_id=_text(rng))
+        layout = _text(rng)
+        data = tracks_to_cdr(tracks, header, layout)
+        assert isinstance(data, bytes)
+        got = message_to_dict(deserialize_message(data, TrackedSkeletonArray))
+        want = message_to_dict(deserialize_message(
+            serialize_message(tracks_to_msg(tracks, header, layout)), TrackedSkeletonArray))
+        assert got == want
+        assert len(got['skeletons']) == len(tracks)
+        assert [len(s['joints']) for s in got['skeletons']] == joints
+        floats = [v for sk in got['skeletons'] for j in sk['joints']
+                  for v in (*j['position'].values(), j['confidence'], j['reprojection_error'])]
+        assert all(math.isfinite(v) for v in floats)

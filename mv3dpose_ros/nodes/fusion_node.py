@@ -47,7 +47,7 @@ from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, le
 from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns_to_stamp,
                                        person2d_array_to_numpy, Persons2D, skeleton_info_msg,
-                                       stamp_to_ns, tracks_to_msg)
+                                       stamp_to_ns, tracks_to_cdr)
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
 import numpy as np
@@ -566,7 +566,7 @@ class FusionNode(Node):
 
     def _publish(self, tracks: List[Track], stamp_ns: int) -> None:
         header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)
-        self.tracks_pub.publish(tracks_to_msg(tracks, header, self.layout.name))
+        self.tracks_pub.publish(tracks_to_cdr(tracks, header, self.layout.name))
         self.output_rate.tick()
         self.latency.add((self._now_ns() - stamp_ns) / NS_PER_S)
         if self.markers_enabled and self.markers_pub.get_subscription_count() > 0:

@@ -20,9 +20,10 @@ The one place where NaN (the core's "missing") becomes explicit validity (``conf
 """
 
 from dataclasses import dataclass
+import functools
 import math
 import struct
-from typing import Any, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import Any, Iterable, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Vector3
@@ -286,46 +287,186 @@ def _finite(value: float, default: float = 0.0) -> float:
     return value if math.isfinite(value) else default
 
 
+def _split_stamp(sec: float) -> Tuple[int, int]:
+    """Return ``sec_to_stamp(sec)`` as ``(sec, nanosec)`` without building a message."""
+    if not math.isfinite(sec):
+        return 0, 0
+    return divmod(round(sec * 1e9), 1_000_000_000)
+
+
+F32_MAX = float(np.finfo(np.float32).max)
+
+
+class _TrackFields(NamedTuple):
+    """The values one ``TrackedSkeleton`` carries: NaN already turned into validity."""
+
+    track_id: int
+    state: int
+    confidence: float
+    first_seen: Tuple[int, int]
+    last_observed: Tuple[int, int]
+    age: int
+    missed: int
+    position: List[float]                    # zeros when not finite
+    velocity: List[float]                    # zeros unless velocity_valid
+    velocity_valid: bool
+    source_cameras: Tuple[str, ...]
+
+
+class _JointFields(NamedTuple):
+    """Per-joint values of tracks with equal joint counts, ``[T, J]``; MISSING made explicit."""
+
+    xyz: np.ndarray             # [T, J, 3] float64, zeros where MISSING
+    confidence: np.ndarray      # [T, J] float64 in [0, 1], 0 where MISSING
+    state: np.ndarray           # [T, J] uint8, MISSING where unusable
+    num_views: np.ndarray       # [T, J] uint8, 0 where MISSING
+    error: np.ndarray           # [T, J] float64 px, -1 where not applicable
+
+
+def _track_fields(track: Track) -> _TrackFields:
+    """Return the per-track values ``track`` publishes."""
+    root = np.asarray(track.position, dtype=np.float64).tolist()
+    vel = np.asarray(track.velocity, dtype=np.float64).tolist()
+    vel_ok = all(map(math.isfinite, vel))
+    return _TrackFields(
+        track_id=int(track.track_id), state=int(track.state),
+        confidence=min(max(_finite(track.score), 0.0), 1.0),
+        first_seen=_split_stamp(track.first_seen),
+        last_observed=_split_stamp(track.last_observed), age=int(track.age),
+        missed=int(track.missed),
+        position=root if all(map(math.isfinite, root)) else [0.0, 0.0, 0.0],
+        velocity=vel if vel_ok else [0.0, 0.0, 0.0], velocity_valid=vel_ok,
+        source_cameras=tuple(track.source_cameras))
+
+
+def _joint_fields(tracks: Sequence[Track]) -> _JointFields:
+    """Return the per-joint values of ``tracks`` (equal joint counts), vectorised over all."""
+    num = len(tracks)
+    states = np.array([t.joint_state for t in tracks], dtype=np.uint8).reshape(num, -1)
+    xyz = np.array([t.joints for t in tracks], dtype=np.float64).reshape(num, -1, 3)
+    conf = np.array([t.confidence for t in tracks], dtype=np.float64).reshape(num, -1)
+    err = np.array([t.reprojection_error for t in tracks], dtype=np.float64).reshape(num, -1)
+    views = np.array([t.num_views for t in tracks]).reshape(num, -1)
+    usable = (states != JointState.MISSING) & np.isfinite(xyz).all(axis=-1)
+    conf = np.clip(conf, 0.0, 1.0)            # NaN stays NaN, +-inf -> 1 / 0
+    err[~(np.abs(err) <= F32_MAX)] = -1.0        # NaN, inf and what float32 cannot hold
+    return _JointFields(
+        xyz=np.where(usable[..., None], xyz, 0.0),
+        confidence=np.where(usable & ~np.isnan(conf), conf, 0.0),
+        state=np.where(usable, states, np.uint8(JointState.MISSING)).astype(np.uint8),
+        num_views=np.where(usable, views.astype(np.int64).clip(0, 255), 0).astype(np.uint8),
+        error=np.where(usable, err, -1.0))
+
+
+def _all_joint_fields(tracks: Sequence[Track]) -> List[_JointFields]:
+    """Return ``_joint_fields`` per track: one vectorised pass when joint counts agree."""
+    counts = {len(t.joint_state) for t in tracks}
+    if len(counts) == 1:
+        f = _joint_fields(tracks)
+        return [_JointFields(*(a[i] for a in f)) for i in range(len(tracks))]
+    return [_JointFields(*(a[0] for a in _joint_fields([t]))) for t in tracks]
+
+
+def _skeleton_msg(f: _TrackFields, j: _JointFields) -> TrackedSkeleton:
+    msg = TrackedSkeleton(track_id=f.track_id, state=f.state, confidence=f.confidence,
+                          first_seen=Time(sec=f.first_seen[0], nanosec=f.first_seen[1]),
+                          last_observed=Time(sec=f.last_observed[0],
+                                             nanosec=f.last_observed[1]),
+                          age=f.age, missed=f.missed, velocity_valid=f.velocity_valid,
+                          source_cameras=list(f.source_cameras))
+    x, y, z = f.position
+    msg.position = Point(x=x, y=y, z=z)
+    x, y, z = f.velocity
+    msg.velocity = Vector3(x=x, y=y, z=z)
+    msg.position_covariance = _COVARIANCE_UNKNOWN
+    msg.joints = [Joint3D(position=Point(x=x, y=y, z=z), confidence=c, state=s, num_views=v,
+                          reprojection_error=e)
+                  for (x, y, z), c, s, v, e in zip(j.xyz.tolist(), j.confidence.tolist(),
+                                                   j.state.tolist(), j.num_views.tolist(),
+                                                   j.error.tolist())]
+    return msg
+
+
 def track_to_msg(track: Track) -> TrackedSkeleton:
     """Convert one core ``Track`` to a ``TrackedSkeleton`` (NaN becomes explicit validity)."""
-    msg = TrackedSkeleton(track_id=int(track.track_id), state=int(track.state),
-                          confidence=float(np.clip(_finite(track.score), 0.0, 1.0)),
-                          first_seen=sec_to_stamp(track.first_seen),
-                          last_observed=sec_to_stamp(track.last_observed),
-                          age=int(track.age), missed=int(track.missed))
-    root = np.asarray(track.position, dtype=np.float64)
-    if np.all(np.isfinite(root)):
-        msg.position = Point(x=float(root[0]), y=float(root[1]), z=float(root[2]))
-    vel = np.asarray(track.velocity, dtype=np.float64)
-    msg.velocity_valid = bool(np.all(np.isfinite(vel)))
-    if msg.velocity_valid:
-        msg.velocity = Vector3(x=float(vel[0]), y=float(vel[1]), z=float(vel[2]))
-    msg.position_covariance = [-1.0] + [0.0] * 8
-    states = np.asarray(track.joint_state, dtype=np.uint8)
-    xyz = np.asarray(track.joints, dtype=np.float64)
-    usable = (states != JointState.MISSING) & np.all(np.isfinite(xyz), axis=1)
-    xyz = np.where(usable[:, None], xyz, 0.0).tolist()
-    conf = np.clip(np.nan_to_num(np.asarray(track.confidence, dtype=np.float64)), 0.0, 1.0)
-    err = np.nan_to_num(np.asarray(track.reprojection_error, dtype=np.float64), nan=-1.0,
-                        posinf=-1.0, neginf=-1.0)
-    views = np.asarray(track.num_views).astype(np.int64).clip(0, 255)
-    joints = []
-    for j, (x, y, z) in enumerate(xyz):
-        ok = bool(usable[j])
-        joints.append(Joint3D(
-            position=Point(x=x, y=y, z=z), confidence=float(conf[j]) if ok else 0.0,
-            state=int(states[j]) if ok else JointState.MISSING,
-            num_views=int(views[j]) if ok else 0,
-            reprojection_error=float(err[j]) if ok else -1.0))
-    msg.joints = joints
-    msg.source_cameras = list(track.source_cameras)
-    return msg
+    return _skeleton_msg(_track_fields(track), _all_joint_fields([track])[0])
 
 
 def tracks_to_msg(tracks: Iterable[Track], header: Header, layout: str) -> TrackedSkeletonArray:
     """Build the ``TrackedSkeletonArray`` of one synchronised set."""
-    return TrackedSkeletonArray(header=header, layout=layout,
-                                skeletons=[track_to_msg(t) for t in tracks])
+    tracks = list(tracks)
+    return TrackedSkeletonArray(
+        header=header, layout=layout,
+        skeletons=[_skeleton_msg(_track_fields(t), j)
+                   for t, j in zip(tracks, _all_joint_fields(tracks))])
+
+
+_COVARIANCE_UNKNOWN = (-1.0,) + (0.0,) * 8
+# TrackedSkeleton up to its joint count, from an 8-aligned start (little-endian CDR):
+# track_id, state, confidence, first_seen, last_observed, age, missed, position, velocity,
+# velocity_valid, position_covariance, len(joints).
+_SKELETON_HEAD = struct.Struct('<QB3xfiIiIII3d3d?7x9dI')
+# One Joint3D from an 8-aligned start; the next one starts 40 bytes on (the last has 36).
+_JOINT3D = np.dtype({'names': ['position', 'confidence', 'state', 'num_views',
+                               'reprojection_error'],
+                     'formats': [('<f8', (3,)), '<f4', 'u1', 'u1', '<f4'],
+                     'offsets': [0, 24, 28, 29, 32], 'itemsize': 40})
+_U32 = struct.Struct('<I')
+
+
+def _cdr_align(out: bytearray, n: int) -> None:
+    """Pad ``out`` (CDR after its 4-byte encapsulation header) to a multiple of ``n``."""
+    out += bytes(-(len(out) - 4) % n)
+
+
+@functools.lru_cache(maxsize=4096)
+def _cdr_strings(texts: Tuple[str, ...], sequence: bool) -> bytes:
+    """Return CDR strings (after their count if ``sequence``) as written from a 4-aligned start."""
+    out = bytearray(b'\x00' * 4)             # stands in for the encapsulation: offsets from 4
+    if sequence:
+        out += _U32.pack(len(texts))
+    for text in texts:
+        _cdr_align(out, 4)
+        data = text.encode('utf-8')
+        out += _U32.pack(len(data) + 1)
+        out += data
+        out += b'\x00'
+    return bytes(out[4:])
+
+
+def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes:
+    """
+    Serialise the ``TrackedSkeletonArray`` of ``tracks_to_msg`` directly to CDR bytes.
+
+    Same values (``_track_fields`` / ``_joint_fields``); a publisher sends the bytes as they
+    are (``publish(bytes)``), skipping one Python object per joint and rclpy's conversion
+    (about 1 ms per output at 6 people).
+    """
+    out = bytearray(b'\x00\x01\x00\x00')          # plain CDR, little endian
+    out += struct.pack('<iI', header.stamp.sec, header.stamp.nanosec)
+    out += _cdr_strings((header.frame_id, layout), False)
+    tracks = list(tracks)
+    _cdr_align(out, 4)
+    out += _U32.pack(len(tracks))
+    for track, j in zip(tracks, _all_joint_fields(tracks)):
+        f = _track_fields(track)
+        _cdr_align(out, 8)
+        num = len(j.state)
+        out += _SKELETON_HEAD.pack(f.track_id, f.state, f.confidence, *f.first_seen,
+                                   *f.last_observed, f.age, f.missed, *f.position,
+                                   *f.velocity, f.velocity_valid, *_COVARIANCE_UNKNOWN, num)
+        if num:
+            _cdr_align(out, 8)
+            joints = np.zeros(num, _JOINT3D)
+            joints['position'] = j.xyz
+            joints['confidence'] = j.confidence
+            joints['state'] = j.state
+            joints['num_views'] = j.num_views
+            joints['reprojection_error'] = j.error
+            out += memoryview(joints).cast('B')[:-4]
+        _cdr_align(out, 4)
+        out += _cdr_strings(f.source_cameras, True)
+    return bytes(out)
 
 
 def msg_to_tracks(msg: TrackedSkeletonArray) -> List[Track]:
