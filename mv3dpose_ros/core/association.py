@@ -172,45 +172,46 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     num_c = len(offsets) - 1
     if num_n == 0:
         return np.zeros((0, num_c), dtype=int)
-    cam_of = np.repeat(np.arange(num_c), np.diff(offsets))
     if norm_coefficients is None:
         norm_coefficients = epipolar_norm_coefficients(essentials)
     q_all = quadratic_monomials(x)
+    bounds = offsets.tolist()
     members = np.full((num_n, num_c), -1, dtype=int)
-    ref_pose: list = []
-    ref_cand: list = []
+    # Reference views (at most one per pose): pose, camera and one-hot candidate, filled in
+    # place so the loop slices them instead of rebuilding arrays.
+    ref_pose = np.zeros(num_n, dtype=int)
+    ref_cam = np.zeros(num_n, dtype=int)
+    onehot = np.zeros((num_n, num_n))
     nref: list = []
-    num_k = 0
+    num_m = num_k = 0
     for cam in (range(num_c) if order is None else order):
-        lo, hi = int(offsets[cam]), int(offsets[cam + 1])
+        lo, hi = bounds[cam], bounds[cam + 1]
         if hi == lo:
             continue
-        matched = np.zeros(hi - lo, dtype=bool)
+        new = list(range(lo, hi))
         if num_k:
-            rp = np.array(ref_pose)
-            rc = cam_of[rp]
+            rp, rc = ref_pose[:num_m], ref_cam[:num_m]
             dsum, dcnt = symmetric_epipolar_distance(x[lo:hi], x[rp], essentials[rc, cam],
                                                      q_all[lo:hi], norm_coefficients[rc, cam])
             usable = dcnt >= min_joints
-            onehot = np.eye(num_k)[ref_cand]                 # [M, K] reference -> candidate
-            total = np.where(usable, dsum, 0.0) @ onehot
-            count = (usable * dcnt) @ onehot
+            ref_of = onehot[:num_m, :num_k]                  # [M, K] reference -> candidate
             with np.errstate(invalid='ignore', divide='ignore'):
-                cost = total / count                         # NaN where no usable view
-            rows, cols = gated_assignment(cost, threshold)
-            members[cols, cam] = lo + rows
-            matched[rows] = True
+                cost = (np.where(usable, dsum, 0.0) @ ref_of) / ((usable * dcnt) @ ref_of)
+            rows, cols = gated_assignment(cost, threshold)   # NaN: no usable view
             for r, k in zip(rows.tolist(), cols.tolist()):
+                members[k, cam] = lo + r
+                new[r] = -1
                 if nref[k] < max_reference_views:
-                    ref_pose.append(lo + r)
-                    ref_cand.append(k)
+                    ref_pose[num_m], ref_cam[num_m], onehot[num_m, k] = lo + r, cam, 1.0
+                    num_m += 1
                     nref[k] += 1
-        for r in np.nonzero(~matched)[0].tolist():
-            members[num_k, cam] = lo + r
-            ref_pose.append(lo + r)
-            ref_cand.append(num_k)
-            nref.append(1)
-            num_k += 1
+        for n in new:
+            if n >= 0:
+                members[num_k, cam] = n
+                ref_pose[num_m], ref_cam[num_m], onehot[num_m, num_k] = n, cam, 1.0
+                num_m += 1
+                nref.append(1)
+                num_k += 1
     members = members[:num_k]
     return members[(members >= 0).sum(axis=1) >= min_views]
 
@@ -224,10 +225,13 @@ def gated_assignment(cost: np.ndarray, threshold) -> Tuple[np.ndarray, np.ndarra
     alternative: the solve maximises the number of valid matches, then minimises their cost.
     Returns ``(rows, cols)`` of the accepted pairs.
     """
-    with np.errstate(invalid='ignore'):
-        feasible = cost < threshold
-    if not feasible.any():
-        return np.empty(0, dtype=int), np.empty(0, dtype=int)
+    feasible = cost < threshold                      # NaN compares False
+    rows, cols = np.nonzero(feasible)
+    r, c = rows.tolist(), cols.tolist()
+    if len(set(r)) == len(r) == len(set(c)):
+        # The feasible pairs are disjoint, so they are the whole solution (the usual case of
+        # well separated people): no solve needed.
+        return rows, cols
     rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
     keep = feasible[rows, cols]
     return rows[keep], cols[keep]
