@@ -54,10 +54,14 @@ def epipolar_norm_coefficients(essentials: np.ndarray) -> np.ndarray:
                      g[..., 1, 2]], axis=-1)
 
 
+# quadratic_monomials as products of coordinate pairs: one gather each side instead of six ops
+_Q_LEFT, _Q_RIGHT = np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2])
+_Q_SCALE = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
+
+
 def quadratic_monomials(x: np.ndarray) -> np.ndarray:
     """Return ``(u^2, v^2, 1, 2uv, 2u, 2v)`` of homogeneous points ``[..., 3]`` (z = 1)."""
-    u, v = x[..., 0], x[..., 1]
-    return np.stack([u * u, v * v, np.ones_like(u), 2 * u * v, 2 * u, 2 * v], axis=-1)
+    return x[..., _Q_LEFT] * x[..., _Q_RIGHT] * _Q_SCALE
 
 
 def symmetric_epipolar_distance(x_new: np.ndarray, x_ref: np.ndarray, essentials: np.ndarray,
@@ -79,13 +83,18 @@ def symmetric_epipolar_distance(x_new: np.ndarray, x_ref: np.ndarray, essentials
         q_new = quadratic_monomials(x_new)
     if coef is None:
         coef = epipolar_norm_coefficients(essentials)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return _epipolar_distance(x_new, x_ref, essentials, q_new, coef)
+
+
+def _epipolar_distance(x_new, x_ref, essentials, q_new, coef):
+    """Compute ``symmetric_epipolar_distance`` (NaN/inf warnings are the caller's to mute)."""
     lines = x_ref @ np.swapaxes(essentials, -1, -2)                # [M, J, 3] in the new camera
     xt = x_new.transpose(1, 0, 2)                                    # [J, P, 3]
     algebraic = np.abs(xt @ lines.transpose(1, 2, 0))                # [J, P, M]
-    with np.errstate(invalid='ignore', divide='ignore'):
-        inv_new = 1.0 / np.hypot(lines[..., 0], lines[..., 1]).T     # [J, M]
-        inv_ref = 1.0 / np.sqrt(q_new.transpose(1, 0, 2) @ coef.T)   # [J, P, M]
-        dist = algebraic * (inv_new[:, None, :] + inv_ref)
+    inv_new = 1.0 / np.hypot(lines[..., 0], lines[..., 1]).T         # [J, M]
+    inv_ref = 1.0 / np.sqrt(q_new.transpose(1, 0, 2) @ coef.T)       # [J, P, M]
+    dist = algebraic * (inv_new[:, None, :] + inv_ref)
     ok = np.isfinite(dist)
     return 0.5 * np.where(ok, dist, 0.0).sum(axis=0), ok.sum(axis=0)
 
@@ -191,11 +200,11 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
         new = list(range(lo, hi))
         if num_k:
             rp, rc = ref_pose[:num_m], ref_cam[:num_m]
-            dsum, dcnt = symmetric_epipolar_distance(x[lo:hi], x[rp], essentials[rc, cam],
-                                                     q_all[lo:hi], norm_coefficients[rc, cam])
-            usable = dcnt >= min_joints
-            ref_of = onehot[:num_m, :num_k]                  # [M, K] reference -> candidate
             with np.errstate(invalid='ignore', divide='ignore'):
+                dsum, dcnt = _epipolar_distance(x[lo:hi], x[rp], essentials[rc, cam],
+                                                q_all[lo:hi], norm_coefficients[rc, cam])
+                usable = dcnt >= min_joints
+                ref_of = onehot[:num_m, :num_k]              # [M, K] reference -> candidate
                 cost = (np.where(usable, dsum, 0.0) @ ref_of) / ((usable * dcnt) @ ref_of)
             rows, cols = gated_assignment(cost, threshold)   # NaN: no usable view
             for r, k in zip(rows.tolist(), cols.tolist()):

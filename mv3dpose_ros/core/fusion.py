@@ -52,6 +52,9 @@ import numpy as np
 _LOG = logging.getLogger(__name__)
 
 SMOOTHING_MODES = ('causal', 'none')
+# Joint states as plain ints: comparing an array with an IntEnum member costs ~6x more.
+_MISSING, _PREDICTED = int(JointState.MISSING), int(JointState.PREDICTED)
+_TRACK_STATES = {int(s): s for s in TrackState}
 
 
 @dataclass
@@ -164,7 +167,7 @@ class Fusion:
         self._bone_lo, self._bone_hi = bone_length_limits(lay.joint_names, lay.bones)
         self._flip_pairs = np.array(lay.flip_pairs, dtype=int).reshape(-1, 2)
         try:
-            self._root: Optional[np.ndarray] = np.array(lay.root_joints, dtype=int)
+            self._root: Optional[Tuple[int, int]] = tuple(lay.root_joints)
         except ValueError:
             self._root = None
         cfg = self.config
@@ -460,32 +463,37 @@ class Fusion:
                              np.where(ok, np.uint8(JointState.PREDICTED),
                                       np.uint8(JointState.MISSING))).astype(np.uint8)
             joints = np.where(ok[..., None], joints, np.nan)
-        missing = state == JointState.MISSING
-        confidence = np.where(missing, 0.0,
-                              np.where(state == JointState.PREDICTED, 0.5, 1.0) * conf_last)
+        missing = state == _MISSING
+        confidence = np.where(missing, 0.0, np.where(state == _PREDICTED, 0.5, 1.0) * conf_last)
         position = np.full((num_t, 3), np.nan)
         velocity = tr.velocity
         if self._root is not None:
-            position = joints[:, self._root].mean(axis=1)
+            # mean of the two root joints, written out (a two-element np.mean costs more)
+            left, right = self._root
+            position = (joints[:, left] + joints[:, right]) / 2
             if self._filter is not None:
-                vj = self._filter.v[:, self._root].mean(axis=1)
-                root_ok = ~missing[:, self._root].any(axis=1)
-                velocity = np.where(root_ok[:, None], vj, velocity)
+                v = self._filter.v
+                root_ok = ~(missing[:, left] | missing[:, right])
+                velocity = np.where(root_ok[:, None], (v[:, left] + v[:, right]) / 2, velocity)
         score = confidence.mean(axis=1) if num_j else np.zeros(num_t)
         if cfg.max_coast_s > 0:
-            score = score * np.clip(1.0 - (stamp - tr.last_observed) / cfg.max_coast_s, 0, 1)
+            fade = 1.0 - (stamp - tr.last_observed) / cfg.max_coast_s
+            score = score * np.minimum(np.maximum(fade, 0.0), 1.0)
         num_views = num_views.astype(np.uint8)
+        # per-track Python values in one conversion each (numpy scalars are slow one by one)
         names = self.camera_names
-        view_sets = [tuple(names[c] for c in np.nonzero(members[d] >= 0)[0]) if d >= 0 else ()
+        seen_by = (members >= 0).tolist()
+        view_sets = [tuple(n for n, s in zip(names, seen_by[d]) if s) if d >= 0 else ()
                      for d in det.tolist()]
-        out = [Track(track_id=int(tr.ids[i]), state=TrackState(int(tr.state[i])),
-                     joints=joints[i], confidence=confidence[i], joint_state=state[i],
-                     num_views=num_views[i], reprojection_error=err[i],
-                     position=position[i], velocity=velocity[i],
-                     first_seen=float(tr.first_seen[i]),
-                     last_observed=float(tr.last_observed[i]), age=int(tr.hits[i]),
-                     missed=int(tr.missed[i]), score=float(score[i]),
-                     source_cameras=view_sets[i])
+        ids, states, hits, missed = (tr.ids.tolist(), tr.state.tolist(), tr.hits.tolist(),
+                                     tr.missed.tolist())
+        first_seen, last_observed, score = (tr.first_seen.tolist(), tr.last_observed.tolist(),
+                                            score.tolist())
+        out = [Track(track_id=ids[i], state=_TRACK_STATES[states[i]], joints=joints[i],
+                     confidence=confidence[i], joint_state=state[i], num_views=num_views[i],
+                     reprojection_error=err[i], position=position[i], velocity=velocity[i],
+                     first_seen=first_seen[i], last_observed=last_observed[i], age=hits[i],
+                     missed=missed[i], score=score[i], source_cameras=view_sets[i])
                for i in range(num_t)]
         out.sort(key=lambda t: t.track_id)
         return out
@@ -495,8 +503,8 @@ class Fusion:
         out = []
         for i in range(len(dead)):
             position = np.full(3, np.nan)
-            if self._root is not None and np.isfinite(dead.pose[i, self._root]).all():
-                position = dead.pose[i, self._root].mean(axis=0)
+            if self._root is not None and np.isfinite(dead.pose[i, list(self._root)]).all():
+                position = dead.pose[i, list(self._root)].mean(axis=0)
             out.append(Track(track_id=int(dead.ids[i]), state=TrackState.DELETED,
                              joints=np.full((num_j, 3), np.nan), confidence=np.zeros(num_j),
                              joint_state=np.zeros(num_j, dtype=np.uint8),

@@ -34,6 +34,10 @@ from mv3dpose_ros.core.types import JointState, Track, TrackState
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+# Joint states as uint8 scalars (the dtype of the state arrays; enum members are slow in numpy).
+_MISSING, _TRIANGULATED, _PREDICTED = (np.uint8(s) for s in (
+    JointState.MISSING, JointState.TRIANGULATED, JointState.PREDICTED))
+
 
 class CausalFilter:
     """
@@ -112,9 +116,7 @@ class CausalFilter:
                                                  np.where(hold, self.count, 0)))
         self.last_seen = np.where(obs, stamp, self.last_seen)
         self.x, self.v = x, v
-        state = np.where(obs, np.uint8(JointState.TRIANGULATED),
-                         np.where(hold, np.uint8(JointState.PREDICTED),
-                                  np.uint8(JointState.MISSING))).astype(np.uint8)
+        state = np.where(obs, _TRIANGULATED, np.where(hold, _PREDICTED, _MISSING))
         if single:
             return x[0].copy(), state[0]
         return x, state
