@@ -18,11 +18,14 @@ import math
 
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, Track, TrackState
-from mv3dpose_ros.ros.markers import MarkerOptions, track_color, tracks_to_markers
+from mv3dpose_ros.ros.markers import (MarkerOptions, track_color, tracks_to_markers,
+                                      tracks_to_markers_cdr)
+from mv3dpose_ros.ros.messages import message_to_dict
 import numpy as np
 import pytest
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
 LAYOUT = get_layout('coco17')
 J = LAYOUT.num_joints
@@ -146,3 +149,27 @@ def test_colours_stable_and_distinct():
 def test_big_track_id_maps_into_int32():
     arr = tracks_to_markers([make_track(2**40 + 3)], LAYOUT.bones, header())
     assert by_ns(arr, 'bones')[0].id == (2**40 + 3) % 2**31
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_cdr_markers_equal_serialised_marker_array(seed):
+    rng = np.random.default_rng(100 + seed)
+    tracks = []
+    for _ in range(int(rng.integers(0, 7))):
+        missing = rng.choice(J, size=rng.integers(0, J + 1), replace=False)
+        predicted = [j for j in rng.choice(J, size=4, replace=False) if j not in missing]
+        t = make_track(int(rng.integers(1, 2**63)), TrackState(int(rng.integers(0, 4))),
+                       missing, predicted, nan_pos=bool(rng.random() < 0.3), rng=rng)
+        t.velocity = np.array([np.nan, 0, 0]) if rng.random() < 0.3 else rng.normal(0, 1, 3)
+        tracks.append(t)
+    opts = MarkerOptions(ns=['mv3dpose', 'ünï/çode'][seed % 2], show_velocity=seed % 3 > 0,
+                         show_labels=seed % 4 > 0, lifetime_s=float(rng.uniform(0, 3)))
+    h = Header(frame_id=['map', 'wörld_🙂'][seed % 2])
+    h.stamp.sec, h.stamp.nanosec = int(rng.integers(0, 2**31)), int(rng.integers(0, 10**9))
+    data = tracks_to_markers_cdr(tracks, LAYOUT.bones, h, opts)
+    assert isinstance(data, bytes)
+    got = message_to_dict(deserialize_message(data, MarkerArray))
+    want = message_to_dict(deserialize_message(
+        serialize_message(tracks_to_markers(tracks, LAYOUT.bones, h, opts)), MarkerArray))
+    assert got == want
+    assert len(got['markers']) >= 4

@@ -44,7 +44,7 @@ from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
-from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers
+from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers_cdr
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns_to_stamp,
                                        person2d_array_to_numpy, Persons2D, skeleton_info_msg,
                                        stamp_to_ns, tracks_to_cdr)
@@ -570,8 +570,8 @@ class FusionNode(Node):
         self.output_rate.tick()
         self.latency.add((self._now_ns() - stamp_ns) / NS_PER_S)
         if self.markers_enabled and self.markers_pub.get_subscription_count() > 0:
-            self.markers_pub.publish(tracks_to_markers(tracks, self.layout.bones, header,
-                                                       self.marker_options))
+            self.markers_pub.publish(tracks_to_markers_cdr(tracks, self.layout.bones, header,
+                                                           self.marker_options))
 
     def destroy_node(self) -> None:
         """Detach the logging bridge, then destroy the node."""

