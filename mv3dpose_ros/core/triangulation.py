@@ -104,18 +104,31 @@ def dlt_basis(projections: np.ndarray) -> np.ndarray:
     return basis.reshape(len(projections) * 4, 16).T.copy()
 
 
-def _dlt_terms(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Return ``[C, 4, K, J]`` = ``(u^2 + v^2, u, v, 1)``: the weight-free DLT coefficients."""
-    return np.stack([u * u + v * v, u, v, np.ones_like(u)], axis=1)
+def _dlt_terms(u: np.ndarray, v: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """
+    Return the weight-free DLT coefficients ``[C, 4, K, J]`` = ``(u^2 + v^2, u, v, 1)``.
+
+    Points not ``seen`` get ``(0, 0, 0, 1)``, so NaN never reaches the normal equations (their
+    weight is 0). Filled in place: cheaper than masking and stacking four small arrays.
+    """
+    terms = np.zeros((u.shape[0], 4) + u.shape[1:])
+    uu, vv = terms[:, 1], terms[:, 2]
+    np.copyto(uu, u, where=seen)
+    np.copyto(vv, v, where=seen)
+    np.multiply(uu, uu, out=terms[:, 0])
+    terms[:, 0] += vv * vv
+    terms[:, 3] = 1.0
+    return terms
 
 
 # Cramer's rule on the symmetric 3x3 block ``a`` of the 4x4 normal matrix (row-major rows of
 # ``dlt_basis``: a00 = 0, a01 = 1, a02 = 2, a11 = 5, a12 = 6, a22 = 10; right side -(3, 7, 11)).
-# Cofactors c00, c01, c02, c11, c12, c22 = g0 * g1 - g2 * g3 with g = m[_COFACTOR_ROWS]: one
-# gather and three products instead of thirty small ones.
+# Cofactors c00, c01, c02, c11, c12, c22 = g0 * g1 - g2 * g3 with g = rows _COFACTOR_ROWS of
+# m: one gather (``take``, much cheaper than fancy indexing) and three products instead of
+# thirty small ones. _COFACTOR_OF lists c_ij for i, j in 0..2 (row-major).
 _COFACTOR_ROWS = np.array([[5, 2, 1, 0, 1, 0], [10, 6, 6, 10, 2, 5],
-                           [6, 1, 2, 2, 0, 1], [6, 10, 5, 2, 6, 1]])
-_COFACTOR_OF = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])     # [i, j] -> index of c_ij
+                           [6, 1, 2, 2, 0, 1], [6, 10, 5, 2, 6, 1]]).ravel()
+_COFACTOR_OF = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
 
 
 def _normal_solve(terms: np.ndarray, w: np.ndarray, basis: np.ndarray,
@@ -123,13 +136,13 @@ def _normal_solve(terms: np.ndarray, w: np.ndarray, basis: np.ndarray,
     """Solve the weighted DLT normal equations of all joints; return ``[3, K, J]`` (NaN: fail)."""
     c, _, k, j = terms.shape
     m = basis @ (terms * w[:, None]).reshape(c * 4, k * j)              # [16, K*J]
-    g = m[_COFACTOR_ROWS]
+    g = m.take(_COFACTOR_ROWS, axis=0).reshape(4, 6, k * j)
     cof = g[0] * g[1] - g[2] * g[3]                                      # [6, K*J]
     det = (m[:3] * cof[:3]).sum(axis=0)
     trace = m[0] + m[5] + m[10]
     ok = enough.ravel() & (np.abs(det) > 1e-12 * trace * trace * trace)
-    inv = np.where(ok, 1.0 / det, np.nan)
-    x = (cof[_COFACTOR_OF] * -m[3:12:4]).sum(axis=1) * inv
+    inv = np.where(ok, -1.0 / det, np.nan)        # the sign of the right side -m[3::4] rides here
+    x = (cof.take(_COFACTOR_OF, axis=0).reshape(3, 3, k * j) * m[3:12:4]).sum(axis=1) * inv
     return x.reshape(3, k, j)
 
 
@@ -145,7 +158,7 @@ def triangulate_dlt(u: np.ndarray, v: np.ndarray, w: np.ndarray, projections: np
     if basis is None:
         basis = dlt_basis(projections)
     seen = w > 0
-    terms = _dlt_terms(np.where(seen, u, 0.0), np.where(seen, v, 0.0))
+    terms = _dlt_terms(u, v, seen)
     with np.errstate(invalid='ignore', divide='ignore'):
         return _dlt(terms, np.where(seen, w, 0.0), projections, basis, seen.sum(axis=0) >= 2,
                     reweight)
@@ -224,7 +237,7 @@ def _triangulate_robust(u, v, w, projections, focal_px, gate, min_views, basis):
     used = (w > 0) & np.isfinite(u) & np.isfinite(v)
     observed = used
     # Cleaned once for all solves: a dropped view keeps finite u, v and gets w = 0.
-    terms = _dlt_terms(np.where(used, u, 0.0), np.where(used, v, 0.0))
+    terms = _dlt_terms(u, v, used)
     w = np.where(used, w, 0.0)
     nviews = used.sum(axis=0)
     x = _dlt(terms, w, projections, basis, nviews >= 2)
@@ -316,7 +329,7 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
     booleans.
     """
     fp = np.asarray(flip_pairs, dtype=int).reshape(-1, 2)
-    num_c, num_k = w.shape[:2]
+    num_c, num_k, num_j = w.shape
     out = np.zeros((num_c, num_k, len(fp)), dtype=bool)
     if num_k == 0 or len(fp) == 0 or num_c < 3:
         return out
@@ -327,18 +340,23 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
     sc, sk, sf = (np.asarray(i, dtype=int) for i in suspects)
     if len(sc) == 0:
         return out
-    jab = fp[sf]                                                         # [S, 2]
-    refs = ref_cams[:, sk].T                                             # [S, R]
+    jab = fp.take(sf, axis=0)                                            # [S, 2]
+    refs = ref_cams.take(sk, axis=1).T                                   # [S, R]
     rc = np.maximum(refs, 0)
-    # labels (a, b) of the suspect view and of each reference: [S, 1, 2, 3] and [S, R, 2, 3],
-    # gathered from the homogeneous points in one go each
-    xh = np.stack([u, v, np.ones_like(u)], axis=-1)                      # [C, K, J, 3]
-    at_p = (sc[:, None], sk[:, None], jab)
-    at_r = (rc[..., None], sk[:, None, None], jab[:, None, :])
-    xp = xh[at_p][:, None]
-    xr = xh[at_r]
-    e = essentials[rc, sc[:, None]]                                      # [S, R, 3, 3]
-    lines_p = xr @ np.swapaxes(e, -1, -2)            # in the suspect view, of the references
+    # Flat indices into [C, K, J] of the labels (a, b) of the suspect view [S, 2] and of each
+    # reference [S, R, 2], and into [C, C] of the pair (reference, suspect): ``take`` on flat
+    # indices is several times cheaper than fancy indexing with index tuples.
+    at_p = (sc * num_k + sk)[:, None] * num_j + jab
+    at_r = ((rc * num_k + sk[:, None]) * num_j)[..., None] + jab[:, None, :]
+    pair = rc * num_c + sc[:, None]
+    xh = np.empty(w.shape + (3,))                                        # homogeneous points
+    xh[..., 0], xh[..., 1], xh[..., 2] = u, v, 1.0
+    xh = xh.reshape(-1, 3)
+    xp = xh.take(at_p, axis=0)[:, None]                                  # [S, 1, 2, 3]
+    xr = xh.take(at_r, axis=0)                                           # [S, R, 2, 3]
+    e = essentials.reshape(-1, 3, 3).take(pair, axis=0)                  # [S, R, 3, 3]
+    e_t = np.swapaxes(essentials, -1, -2).reshape(-1, 3, 3).take(pair, axis=0)
+    lines_p = xr @ e_t                               # in the suspect view, of the references
     lines_r = xp @ e                                 # in the references, of the suspect
     alg = np.abs(xp @ np.swapaxes(lines_p, -1, -2))                      # [S, R, i, j]
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -348,11 +366,11 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
         d = alg * (inv_p[..., None, :] + inv_r[..., :, None])
         d_same = d[..., 0, 0] + d[..., 1, 1]
         d_cross = d[..., 0, 1] + d[..., 1, 0]
-        valid = (refs >= 0) & (refs != sc[:, None]) & (w[at_r] > 0).all(axis=-1) \
+        valid = (refs >= 0) & (refs != sc[:, None]) & (w.take(at_r) > 0).all(axis=-1) \
             & np.isfinite(d_same) & np.isfinite(d_cross)
         better = valid & (d_cross < ratio * d_same)
     n_ok, n_better = valid.sum(axis=1), better.sum(axis=1)
-    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w[at_p] > 0).all(axis=-1)
+    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w.take(at_p) > 0).all(axis=-1)
     return out
 
 
