@@ -184,7 +184,7 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     if norm_coefficients is None:
         norm_coefficients = epipolar_norm_coefficients(essentials)
     q_all = quadratic_monomials(x)
-    bounds = offsets.tolist()
+    bounds = np.asarray(offsets).tolist()
     members = np.full((num_n, num_c), -1, dtype=int)
     # Reference views (at most one per pose): pose, camera and one-hot candidate, filled in
     # place so the loop slices them instead of rebuilding arrays.
@@ -193,34 +193,36 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     onehot = np.zeros((num_n, num_n))
     nref: list = []
     num_m = num_k = 0
-    for cam in (range(num_c) if order is None else order):
-        lo, hi = bounds[cam], bounds[cam + 1]
-        if hi == lo:
-            continue
-        new = list(range(lo, hi))
-        if num_k:
-            rp, rc = ref_pose[:num_m], ref_cam[:num_m]
-            with np.errstate(invalid='ignore', divide='ignore'):
-                dsum, dcnt = _epipolar_distance(x[lo:hi], x[rp], essentials[rc, cam],
-                                                q_all[lo:hi], norm_coefficients[rc, cam])
+    # NaN marks missing joints and costs without a usable view: no warnings for them
+    with np.errstate(invalid='ignore', divide='ignore'):
+        for cam in (range(num_c) if order is None else order):
+            lo, hi = bounds[cam], bounds[cam + 1]
+            if hi == lo:
+                continue
+            new = list(range(lo, hi))
+            if num_k:
+                rp, rc = ref_pose[:num_m], ref_cam[:num_m]
+                dsum, dcnt = _epipolar_distance(x[lo:hi], x.take(rp, axis=0),
+                                                essentials[:, cam].take(rc, axis=0), q_all[lo:hi],
+                                                norm_coefficients[:, cam].take(rc, axis=0))
                 usable = dcnt >= min_joints
                 ref_of = onehot[:num_m, :num_k]              # [M, K] reference -> candidate
                 cost = (np.where(usable, dsum, 0.0) @ ref_of) / ((usable * dcnt) @ ref_of)
-            rows, cols = gated_assignment(cost, threshold)   # NaN: no usable view
-            for r, k in zip(rows.tolist(), cols.tolist()):
-                members[k, cam] = lo + r
-                new[r] = -1
-                if nref[k] < max_reference_views:
-                    ref_pose[num_m], ref_cam[num_m], onehot[num_m, k] = lo + r, cam, 1.0
+                rows, cols = gated_assignment(cost, threshold)   # NaN: no usable view
+                for r, k in zip(rows.tolist(), cols.tolist()):
+                    members[k, cam] = lo + r
+                    new[r] = -1
+                    if nref[k] < max_reference_views:
+                        ref_pose[num_m], ref_cam[num_m], onehot[num_m, k] = lo + r, cam, 1.0
+                        num_m += 1
+                        nref[k] += 1
+            for n in new:
+                if n >= 0:
+                    members[num_k, cam] = n
+                    ref_pose[num_m], ref_cam[num_m], onehot[num_m, num_k] = n, cam, 1.0
                     num_m += 1
-                    nref[k] += 1
-        for n in new:
-            if n >= 0:
-                members[num_k, cam] = n
-                ref_pose[num_m], ref_cam[num_m], onehot[num_m, num_k] = n, cam, 1.0
-                num_m += 1
-                nref.append(1)
-                num_k += 1
+                    nref.append(1)
+                    num_k += 1
     members = members[:num_k]
     return members[(members >= 0).sum(axis=1) >= min_views]
 

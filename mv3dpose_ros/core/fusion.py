@@ -34,6 +34,8 @@ Units: thresholds on image distances are in normalised image units (pixels / foc
 """
 
 from dataclasses import asdict, dataclass
+import functools
+from itertools import accumulate
 import logging
 from typing import Dict, List, Mapping, Optional, Set, Tuple
 
@@ -145,6 +147,7 @@ class Fusion:
             if not isinstance(cam, Camera):
                 raise ValueError(f'camera {name!r} is a {type(cam).__name__}, not a Camera')
         self._index = {n: i for i, n in enumerate(self.camera_names)}
+        self._camera_ids = np.arange(len(self.cameras))
         num_c = len(self.cameras)
         self._essentials = np.zeros((num_c, num_c, 3, 3))
         for a in range(num_c):
@@ -226,13 +229,13 @@ class Fusion:
         self._last_stamp = stamp
         tri, members = self._reconstruct(views)
         self.last_poses = tri.joints
-        views = (members >= 0).sum(axis=1)
 
         def can_birth(rows: np.ndarray) -> np.ndarray:
             # only for poses left unmatched: inside the shared field of view, well supported
             in_view = self.cameras_in_view(tri.joints[rows])
+            views = (members[rows] >= 0).sum(axis=1)
             return (in_view >= self._birth_views) \
-                & (views[rows] >= self.config.min_birth_view_ratio * in_view)
+                & (views >= self.config.min_birth_view_ratio * in_view)
 
         upd = self.tracker.update(tri.joints, stamp, can_birth)
         return self._outputs(upd.detection, upd.previous, tri, members, stamp) + tombs \
@@ -266,12 +269,15 @@ class Fusion:
             _LOG.warning('Fusion: %s', message)
 
     def _prepare(self, views: Mapping[str, np.ndarray]
-                 ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> Tuple[np.ndarray, np.ndarray, List[int], np.ndarray]:
         """
         Validate the views and normalise all keypoints at once.
 
-        Returns ``x [N, J, 3]`` homogeneous normalised points (NaN = missing) of the usable
-        poses of all cameras in rig order, their confidences ``[N, J]`` and ``offsets [C+1]``.
+        Returns ``x [N + 1, J, 3]`` homogeneous normalised points (NaN = missing) of the usable
+        poses of all cameras in rig order, their confidences ``[N + 1, J]``, the ``offsets``
+        (C + 1 ints: camera c has rows ``offsets[c]:offsets[c + 1]``) and the index of each
+        pose in its view ``[N]``. The extra last row is a missing pose (NaN, confidence 0):
+        index -1 of a ``members`` table picks it, so camera-major gathers need no masking.
         """
         cfg = self.config
         num_j = self.layout.num_joints
@@ -294,84 +300,82 @@ class Fusion:
             if n:
                 arrays.append(arr)
             counts.append(n)
-        counts = np.array(counts)
         if not arrays:
-            self._source = np.array([-1])
-            return np.zeros((0, num_j, 3)), np.zeros((0, num_j)), np.zeros(len(counts) + 1, int)
+            return (np.full((1, num_j, 3), np.nan), np.zeros((1, num_j)), [0] * (len(counts) + 1),
+                    np.zeros(0, dtype=int))
         a = np.concatenate(arrays, axis=0) if len(arrays) > 1 else arrays[0]
         with np.errstate(invalid='ignore'):
             vis = (a[..., 2] >= cfg.min_joint_confidence) & np.isfinite(a).all(axis=-1)
         keep = vis.sum(axis=1) >= cfg.min_pose_joints
-        cam_of = np.repeat(np.arange(len(counts)), counts)
-        source = np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
+        offsets = list(accumulate(counts, initial=0))
+        cam_of = np.repeat(self._camera_ids, counts)
+        source = np.arange(len(a)) - np.repeat(offsets[:-1], counts)
         if not keep.all():
             a, vis, cam_of, source = a[keep], vis[keep], cam_of[keep], source[keep]
-            counts = np.bincount(cam_of, minlength=len(counts))
-        self._source = np.concatenate((source, [-1]))
-        offsets = np.concatenate(([0], np.cumsum(counts)))
-        k = self._k[cam_of][:, None, :]                                     # [N, 1, 5]
+            counts = np.bincount(cam_of, minlength=len(counts)).tolist()
+            offsets = list(accumulate(counts, initial=0))
+        num_n = offsets[-1]
+        k = self._k.take(cam_of, axis=0)[:, None, :]                       # [N, 1, 5]
         y = (a[..., 1] - k[..., 4]) / k[..., 3]
-        x = np.stack([(a[..., 0] - k[..., 2] - k[..., 1] * y) / k[..., 0], y,
-                      np.ones_like(y)], axis=-1)
-        for c in np.nonzero(counts)[0]:
-            if self._distorted[c]:
+        x = np.empty((num_n + 1, num_j, 3))
+        x[:num_n, :, 0] = (a[..., 0] - k[..., 2] - k[..., 1] * y) / k[..., 0]
+        x[:num_n, :, 1] = y
+        x[:num_n, :, 2] = 1.0
+        for c, n in enumerate(counts):
+            if n and self._distorted[c]:
                 lo, hi = offsets[c], offsets[c + 1]
                 x[lo:hi, :, :2] = self.cameras[c].undistort(a[lo:hi, :, :2])
-        x[~vis] = np.nan
-        conf = np.where(vis, np.clip(a[..., 2], 0.0, 1.0), 0.0)
-        return x, conf, offsets
+        x[:num_n][~vis] = np.nan
+        x[num_n] = np.nan
+        conf = np.zeros((num_n + 1, num_j))
+        conf[:num_n] = np.where(vis, np.minimum(np.maximum(a[..., 2], 0.0), 1.0), 0.0)
+        return x, conf, offsets, source
 
     def _reconstruct(self, views: Mapping[str, np.ndarray]):
         """Associate, triangulate and clean up; return (Triangulation, members [K, C])."""
         cfg = self.config
-        x, conf, offsets = self._prepare(views)
-        num_j = self.layout.num_joints
-        members = associate_stacked(x, offsets, self._essentials,
+        x, conf, offsets, source = self._prepare(views)
+        num_n = offsets[-1]
+        members = associate_stacked(x[:num_n], offsets, self._essentials,
                                     threshold=cfg.epipolar_threshold_norm,
                                     min_joints=cfg.min_shared_joints,
                                     max_reference_views=cfg.max_reference_views,
                                     min_views=cfg.min_views,
                                     norm_coefficients=self._norm_coef,
                                     order=self._order)
-        info = {'poses_2d': int(offsets[-1]),
-                'views_with_poses': int((np.diff(offsets) > 0).sum()),
+        info = {'poses_2d': num_n,
+                'views_with_poses': sum(hi > lo for lo, hi in zip(offsets, offsets[1:])),
                 'candidates': len(members)}
-        pad = np.full((1, num_j), np.nan)
-        u_all = np.concatenate((x[..., 0], pad))
-        v_all = np.concatenate((x[..., 1], pad))
-        w_all = np.concatenate((conf, np.zeros((1, num_j))))
-        gidx = np.where(members >= 0, members, offsets[-1])
-        tri, members, gidx, swaps = self._triangulate(u_all, v_all, w_all, members, gidx)
+        tri, members, swaps = self._triangulate(x, conf, members)
         merged = 0
         if len(members) > 1 and cfg.merge_distance_m > 0:
-            members, gidx, merged = self._merge(tri, members, gidx)
+            members, merged = self._merge(tri, members)
             if merged:
-                tri, members, gidx, swaps = self._triangulate(u_all, v_all, w_all, members,
-                                                              gidx)
+                tri, members, swaps = self._triangulate(x, conf, members)
         info.update(swapped_pairs=swaps, merged=merged, poses_3d=len(members))
-        self.last_members = np.where(members >= 0, self._source[gidx], -1)
+        self.last_members = np.where(members >= 0, source.take(members), -1)
         self._info, self._info_tri = info, tri
         return tri, members
 
-    def _triangulate(self, u_all, v_all, w_all, members, gidx):
+    def _triangulate(self, x: np.ndarray, conf: np.ndarray, members: np.ndarray):
         """Triangulate candidates, fix swaps, check bones, drop thin candidates."""
         cfg = self.config
-        g = gidx.T                                                       # [C, K]
-        u, v, w = u_all[g], v_all[g], w_all[g]                           # [C, K, J]
+        g = members.T                                    # [C, K]; -1 picks the missing pose
+        xg = x.take(g, axis=0)
+        u, v, w = xg[..., 0], xg[..., 1], conf.take(g, axis=0)             # [C, K, J]
         tri = triangulate_robust(u, v, w, self._projections, self._focal,
                                  cfg.reprojection_gate_norm, cfg.min_views, self._basis)
         swaps = 0
         if cfg.swap_check and len(self._flip_pairs) and len(members):
             # A swapped view disagrees with the triangulation on a left or right joint; only
             # such (view, candidate, pair) triples are tested (in 2D, where the swap cannot
-            # contaminate the test).
-            fp = self._flip_pairs
+            # contaminate the test). view_error is finite or inf (not observed), never NaN.
             err = tri.view_error
-            trigger = 0.3 * cfg.reprojection_gate_norm
-            suspect = np.isfinite(err[:, :, fp[:, 0]]) & np.isfinite(err[:, :, fp[:, 1]]) \
-                & (np.maximum(err[:, :, fp[:, 0]], err[:, :, fp[:, 1]]) > trigger)
+            worse = np.maximum(err.take(self._flip_pairs[:, 0], axis=2),
+                               err.take(self._flip_pairs[:, 1], axis=2))
+            suspect = (worse > 0.3 * cfg.reprojection_gate_norm) & (worse < np.inf)
             if suspect.any():
-                sw = swapped_views(u, v, w, self._essentials, fp, cfg.swap_ratio,
+                sw = swapped_views(u, v, w, self._essentials, self._flip_pairs, cfg.swap_ratio,
                                    ref_cams=self._reference_views(members),
                                    suspects=np.nonzero(suspect))
                 if sw.any():
@@ -388,28 +392,30 @@ class Fusion:
         keep = np.isfinite(tri.joints[..., 0]).sum(axis=1) >= cfg.min_candidate_joints
         if not keep.all():
             tri = _subset(tri, keep)
-            members, gidx = members[keep], gidx[keep]
-        return tri, members, gidx, swaps
+            members = members[keep]
+        return tri, members, swaps
 
     def _reference_views(self, members: np.ndarray) -> np.ndarray:
         """Return ``[R, K]`` cameras: each candidate's first views in association order."""
-        num_c = len(self._order)
-        has = members[:, self._order] >= 0                                   # [K, C]
-        first = np.sort(np.where(has, np.arange(num_c), num_c), axis=1)
-        first = first[:, :self.config.max_reference_views + 1]
-        return np.where(first < num_c, self._order[np.minimum(first, num_c - 1)], -1).T
+        width = min(len(self._order), self.config.max_reference_views + 1)
+        order = self._order.tolist()
+        refs = []
+        for row in members.tolist():                    # a few short rows: plain Python
+            first = [c for c in order if row[c] >= 0][:width]
+            refs.append(first + [-1] * (width - len(first)))
+        return np.array(refs, dtype=int).reshape(-1, width).T
 
-    def _merge(self, tri: Triangulation, members: np.ndarray, gidx: np.ndarray):
+    def _merge(self, tri: Triangulation, members: np.ndarray):
         """Merge candidates closer than merge_distance_m seen by disjoint cameras; else NMS."""
         cfg = self.config
         dist = pose_distance(tri.joints, tri.joints, cfg.min_shared_joints)
-        close = np.triu(dist < cfg.merge_distance_m, 1)
+        close = (dist < cfg.merge_distance_m) & _upper_triangle(len(dist))
         if not close.any():
-            return members, gidx, 0
+            return members, 0
         ii, jj = np.nonzero(close)
         order = np.argsort(dist[ii, jj], kind='stable')
         alive = np.ones(len(members), dtype=bool)
-        members, gidx = members.copy(), gidx.copy()
+        members = members.copy()
         strength = tri.num_views.sum(axis=1)
         merged = 0
         for i, j in zip(ii[order].tolist(), jj[order].tolist()):
@@ -418,14 +424,13 @@ class Fusion:
             a, b = members[i] >= 0, members[j] >= 0
             if not (a & b).any():
                 members[i] = np.where(a, members[i], members[j])
-                gidx[i] = np.where(a, gidx[i], gidx[j])
                 alive[j] = False
             elif strength[i] >= strength[j]:
                 alive[j] = False
             else:
                 alive[i] = False
             merged += 1
-        return members[alive], gidx[alive], merged
+        return members[alive], merged
 
     # ------------------------------------------------------------------ output
     def _outputs(self, det: np.ndarray, previous: np.ndarray, tri: Triangulation,
@@ -436,13 +441,14 @@ class Fusion:
         num_t, num_j = len(tr), self.layout.num_joints
         seen = det >= 0
         if seen.all():
-            z, conf_obs = tri.joints[det], tri.confidence[det]
-            num_views, err = tri.num_views[det], tri.error_px[det]
+            z, conf_obs = tri.joints.take(det, axis=0), tri.confidence.take(det, axis=0)
+            num_views, err = tri.num_views.take(det, axis=0), tri.error_px.take(det, axis=0)
         else:                            # row K of the padded arrays is "not observed"
-            z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan)))[det]
-            conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j))))[det]
-            num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int)))[det]
-            err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan)))[det]
+            z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan))).take(det, axis=0)
+            conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j)))).take(det, axis=0)
+            num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int))
+                                       ).take(det, axis=0)
+            err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan))).take(det, axis=0)
         observed = np.isfinite(z[..., 0])
         if observed.all():
             conf_last = conf_obs
@@ -516,6 +522,14 @@ class Fusion:
                              age=int(dead.hits[i]), missed=int(dead.missed[i]), score=0.0,
                              source_cameras=()))
         return out
+
+
+@functools.lru_cache(maxsize=None)
+def _upper_triangle(size: int) -> np.ndarray:
+    """Return the read-only ``[size, size]`` mask of pairs ``i < j`` (np.triu is slow)."""
+    mask = np.triu(np.ones((size, size), dtype=bool), 1)
+    mask.setflags(write=False)
+    return mask
 
 
 def _reject(tri: Triangulation, bad: np.ndarray) -> None:
