@@ -22,6 +22,11 @@ capture time, in the world frame), ``~/markers`` (RViz, only when subscribed), a
 ``~/skeleton_info`` and ``/diagnostics``. Every input is validated first; a bad message is
 dropped with a rate-limited log line naming the camera, topic and reason, and counted in the
 diagnostics, so it can neither stop the node nor reach the tracker.
+
+Inputs are taken as raw CDR and read by ``decode_person2d_array`` (rclpy's deserialiser only
+when it refuses: bytes neither can read are dropped as 'malformed'); ``~/tracks`` and
+``~/markers`` are serialised straight to CDR. Both skip one Python object per keypoint, joint
+or point, which was most of the node's own cost.
 """
 
 from collections import Counter
