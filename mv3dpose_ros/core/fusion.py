@@ -471,9 +471,10 @@ class Fusion:
             joints = np.where(ok[..., None], joints, np.nan)
         missing = state == _MISSING
         confidence = np.where(missing, 0.0, np.where(state == _PREDICTED, 0.5, 1.0) * conf_last)
-        position = np.full((num_t, 3), np.nan)
         velocity = tr.velocity
-        if self._root is not None:
+        if self._root is None:
+            position = np.full((num_t, 3), np.nan)
+        else:
             # mean of the two root joints, written out (a two-element np.mean costs more)
             left, right = self._root
             position = (joints[:, left] + joints[:, right]) / 2

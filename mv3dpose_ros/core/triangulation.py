@@ -48,6 +48,10 @@ _NOMINAL_BONES_M: Dict[Tuple[str, str], float] = {
 }
 
 
+# Sums over x, y, z as a product with ones: several times cheaper than a last-axis sum of 3.
+_XYZ = np.ones(3)
+
+
 def _strip_side(name: str) -> str:
     for prefix in ('left_', 'right_'):
         if name.startswith(prefix):
@@ -179,8 +183,8 @@ def _dlt(terms: np.ndarray, w: np.ndarray, projections: np.ndarray, basis: np.nd
 def _depth(x: np.ndarray, projections: np.ndarray) -> np.ndarray:
     """Return the ``[C, K, J]`` depth of points ``x [3, K, J]`` in every camera."""
     k, j = x.shape[1:]
-    return (projections[:, 2, :3] @ x.reshape(3, k * j)).reshape(len(projections), k, j) \
-        + projections[:, 2, 3, None, None]
+    return (projections[:, 2, :3] @ x.reshape(3, k * j) + projections[:, 2, 3:]
+            ).reshape(len(projections), k, j)
 
 
 def reproject(x: np.ndarray, projections: np.ndarray
@@ -193,8 +197,8 @@ def reproject(x: np.ndarray, projections: np.ndarray
 def _reproject(x: np.ndarray, projections: np.ndarray
                ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     k, j = x.shape[1:]
-    cam = (projections[:, :, :3] @ x.reshape(3, k * j)).reshape(len(projections), 3, k, j) \
-        + projections[:, :, 3, None, None]
+    rows = projections.reshape(-1, 4)              # one [3C, 3] product, not C small ones
+    cam = (rows[:, :3] @ x.reshape(3, k * j) + rows[:, 3:]).reshape(len(projections), 3, k, j)
     inv = 1.0 / cam[:, 2]
     return cam[:, 0] * inv, cam[:, 1] * inv, cam[:, 2]
 
@@ -288,9 +292,9 @@ def bone_outliers(joints: np.ndarray, bones: np.ndarray, lo: np.ndarray, hi: np.
     if len(bones) == 0 or joints.shape[0] == 0:
         return np.zeros(joints.shape[:2], dtype=bool)
     a, b = bones[:, 0], bones[:, 1]
-    length = np.linalg.norm(joints[:, a] - joints[:, b], axis=-1)     # [K, B]
-    with np.errstate(invalid='ignore'):
-        bad = (length < lo) | (length > hi)                           # NaN -> False
+    d = joints.take(a, axis=1) - joints.take(b, axis=1)
+    length = np.sqrt((d * d) @ _XYZ)                                  # [K, B]
+    bad = (length < lo) | (length > hi)                               # NaN -> False
     if not bad.any():
         return np.zeros(joints.shape[:2], dtype=bool)
     count = np.zeros(joints.shape[:2])
