@@ -36,8 +36,14 @@ With ``--runs N`` each configuration runs N times and the run with the lowest no
 median is printed (the machine is shared). ``--markers`` also subscribes to ``~/markers``
 (as RViz would), so their cost is included.
 
+``--micro`` instead times the node's message paths in this process, without DDS, per
+configuration: input decoding (CDR -> validated [P, J, 3]) by ``decode_person2d_array`` vs
+rclpy's deserialiser + ``person2d_array_to_numpy``, and the outputs ``tracks_to_cdr`` vs
+``tracks_to_msg`` + rclpy serialisation, ``tracks_to_markers_cdr`` vs ``tracks_to_markers`` +
+serialisation (median of repeated calls, microseconds).
+
 Usage: ``python bench/bench_fusion_node.py [--seconds 10] [--configs 5x4,16x6] [--rate 30]
-[--runs 2] [--markers]``
+[--runs 2] [--markers] [--micro]``
 """
 
 import argparse
@@ -47,11 +53,17 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
-from mv3dpose_ros.ros.messages import numpy_to_person2d_array
+from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.skeleton import get_layout
+from mv3dpose_ros.ros.markers import tracks_to_markers, tracks_to_markers_cdr
+from mv3dpose_ros.ros.messages import (decode_person2d_array, ns_to_stamp,
+                                       numpy_to_person2d_array, person2d_array_to_numpy,
+                                       tracks_to_cdr, tracks_to_msg)
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim.people import WalkConfig
 from mv3dpose_ros.sim.rig import RigConfig
@@ -76,15 +88,55 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / TICKS
 
 
+def _scene(cams: int, people: int, frames: int, rate: float, seed: int) -> Any:
+    radius = 6.0 if people <= 8 else 9.0
+    return make_scene(num_cameras=cams, num_people=people, num_frames=frames, fps=rate,
+                      seed=seed, rig=RigConfig(num_cameras=cams, radius_m=radius),
+                      walk=WalkConfig(area_radius_m=radius * 0.5))
+
+
+def _time_us(fn: Callable[[], Any], repeat: int = 200) -> float:
+    """Return the median wall time of ``fn()`` in microseconds (after one warm-up call)."""
+    fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times)) * 1e6
+
+
+def micro(cams: int, people: int, rate: float, seed: int = 0) -> None:
+    """Print the in-process cost of the node's message paths (no DDS)."""
+    scene = _scene(cams, people, 40, rate, seed)
+    layout = get_layout(scene.layout)
+    fusion = Fusion(scene.cameras, layout)
+    for f in range(len(scene.views)):
+        tracks = fusion.step(scene.views[f], f / rate)
+    cam = next(iter(scene.cameras))
+    data = serialize_message(numpy_to_person2d_array(
+        scene.views[-1][cam], Header(frame_id=cam), cam, scene.cameras[cam].width,
+        scene.cameras[cam].height, scene.layout))
+    header = Header(stamp=ns_to_stamp(time.time_ns()), frame_id='map')
+    j = layout.num_joints
+    rows = [
+        ('input, per message', lambda: person2d_array_to_numpy(decode_person2d_array(data), j),
+         lambda: person2d_array_to_numpy(deserialize_message(data, Person2DArray), j)),
+        ('~/tracks, per set', lambda: tracks_to_cdr(tracks, header, layout.name),
+         lambda: serialize_message(tracks_to_msg(tracks, header, layout.name))),
+        ('~/markers, per set', lambda: tracks_to_markers_cdr(tracks, layout.bones, header),
+         lambda: serialize_message(tracks_to_markers(tracks, layout.bones, header)))]
+    for name, fast, slow in rows:
+        f_us, s_us = _time_us(fast), _time_us(slow)
+        print(f'{cams:4d} x {people:<2d} {len(tracks)} tracks | {name:<20} | CDR {f_us:7.1f} us '
+              f'| rclpy messages {s_us:7.1f} us | x{s_us / f_us:4.1f}', flush=True)
+
+
 def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0,
         markers: bool = False) -> dict:
     frames = int(seconds * rate)
     warmup = int(3 * rate)             # at most 3 s until the first output (discovery)
-    radius = 6.0 if people <= 8 else 9.0
-    scene = make_scene(num_cameras=cams, num_people=people, num_frames=warmup + frames,
-                       fps=rate,
-                       seed=seed, rig=RigConfig(num_cameras=cams, radius_m=radius),
-                       walk=WalkConfig(area_radius_m=radius * 0.5))
+    scene = _scene(cams, people, warmup + frames, rate, seed)
     tmp = tempfile.mkdtemp(prefix='bench_fusion_node_')
     rig = os.path.join(tmp, 'rig.yaml')
     save_rig_yaml(scene.cameras, rig)
@@ -223,7 +275,14 @@ def main() -> int:
                         help='runs per configuration; the lowest latency median is printed')
     parser.add_argument('--markers', action='store_true',
                         help='also subscribe to ~/markers (as RViz would)')
+    parser.add_argument('--micro', action='store_true',
+                        help='time the message paths in-process instead (no DDS)')
     args = parser.parse_args()
+    if args.micro:
+        print('node message paths in-process (median per call; shared machine)')
+        for item in args.configs.split(','):
+            micro(*(int(v) for v in item.lower().split('x')), args.rate)
+        return 0
     print(f'fusion_node benchmark: {args.rate:g} Hz, {args.seconds:g} s per configuration, '
           f'best of {args.runs} run(s), markers {"subscribed" if args.markers else "off"}, '
           f'{os.cpu_count()} CPUs (shared machine: figures vary with load)')

@@ -118,6 +118,7 @@ def _specs(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
     out = [_Spec(ns, 0, Marker.ARROW, Marker.DELETEALL, zero3, zero3, (0.0,) * 4, (0, 0))
            for ns in namespaces]
     d = opt.joint_diameter_m
+    pairs = np.asarray(bones, dtype=np.int64).reshape(-1, 2)     # once, not per track
     for track in tracks:
         if track.state == TrackState.DELETED:
             continue
@@ -131,7 +132,7 @@ def _specs(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
         states = np.asarray(track.joint_state)
         ok = valid_joints(track)
 
-        segs = bone_segments(track, bones, ok)
+        segs = bone_segments(track, pairs, ok)
         if len(segs):
             out.append(_Spec(namespaces[0], mid, Marker.LINE_LIST, Marker.ADD, zero3,
                              (opt.line_width_m, 0.0, 0.0), color, lifetime, points=segs))
