@@ -58,12 +58,7 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
-from mv3dpose_ros.core.fusion import Fusion
-from mv3dpose_ros.core.skeleton import get_layout
-from mv3dpose_ros.ros.markers import tracks_to_markers, tracks_to_markers_cdr
-from mv3dpose_ros.ros.messages import (decode_person2d_array, ns_to_stamp,
-                                       numpy_to_person2d_array, person2d_array_to_numpy,
-                                       tracks_to_cdr, tracks_to_msg)
+from mv3dpose_ros.ros.messages import numpy_to_person2d_array
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim.people import WalkConfig
 from mv3dpose_ros.sim.rig import RigConfig
@@ -108,6 +103,14 @@ def _time_us(fn: Callable[[], Any], repeat: int = 200) -> float:
 
 def micro(cams: int, people: int, rate: float, seed: int = 0) -> None:
     """Print the in-process cost of the node's message paths (no DDS)."""
+    # Imported here so that the DDS benchmark also runs against older trees (A/B runs with
+    # PYTHONPATH pointing at another checkout).
+    from mv3dpose_ros.core.fusion import Fusion
+    from mv3dpose_ros.core.skeleton import get_layout
+    from mv3dpose_ros.ros.markers import tracks_to_markers, tracks_to_markers_cdr
+    from mv3dpose_ros.ros.messages import (decode_person2d_array, ns_to_stamp,
+                                           person2d_array_to_numpy, tracks_to_cdr,
+                                           tracks_to_msg)
     scene = _scene(cams, people, 40, rate, seed)
     layout = get_layout(scene.layout)
     fusion = Fusion(scene.cameras, layout)
