@@ -350,19 +350,20 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
     # Flat indices into [C, K, J] of the labels (a, b) of the suspect view [S, 2] and of each
     # reference [S, R, 2], and into [C, C] of the pair (reference, suspect): ``take`` on flat
     # indices is several times cheaper than fancy indexing with index tuples.
-    at_p = (sc * num_k + sk)[:, None] * num_j + jab
-    at_r = ((rc * num_k + sk[:, None]) * num_j)[..., None] + jab[:, None, :]
+    in_cell = sk[:, None] * num_j + jab                                  # [S, 2]
+    at_p = (sc * (num_k * num_j))[:, None] + in_cell
+    at_r = (rc * (num_k * num_j))[..., None] + in_cell[:, None, :]
     pair = rc * num_c + sc[:, None]
     xh = np.empty(w.shape + (3,))                                        # homogeneous points
     xh[..., 0], xh[..., 1], xh[..., 2] = u, v, 1.0
     xh = xh.reshape(-1, 3)
     xp = xh.take(at_p, axis=0)[:, None]                                  # [S, 1, 2, 3]
     xr = xh.take(at_r, axis=0)                                           # [S, R, 2, 3]
+    # contiguous operands: a transposed (strided) one makes these small products much slower
     e = essentials.reshape(-1, 3, 3).take(pair, axis=0)                  # [S, R, 3, 3]
-    e_t = np.swapaxes(essentials, -1, -2).reshape(-1, 3, 3).take(pair, axis=0)
-    lines_p = xr @ e_t                               # in the suspect view, of the references
-    lines_r = xp @ e                                 # in the references, of the suspect
-    alg = np.abs(xp @ np.swapaxes(lines_p, -1, -2))                      # [S, R, i, j]
+    lines_p = xr @ np.ascontiguousarray(np.swapaxes(e, -1, -2))  # in the suspect view, of the
+    lines_r = xp @ e                                             # refs; in the refs, of the suspect
+    alg = np.abs(xp @ np.ascontiguousarray(np.swapaxes(lines_p, -1, -2)))   # [S, R, i, j]
     with np.errstate(invalid='ignore', divide='ignore'):
         inv_p = 1.0 / np.hypot(lines_p[..., 0], lines_p[..., 1])         # [S, R, j]
         inv_r = 1.0 / np.hypot(lines_r[..., 0], lines_r[..., 1])         # [S, R, i]
@@ -370,11 +371,13 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
         d = alg * (inv_p[..., None, :] + inv_r[..., :, None])
         d_same = d[..., 0, 0] + d[..., 1, 1]
         d_cross = d[..., 0, 1] + d[..., 1, 0]
-        valid = (refs >= 0) & (refs != sc[:, None]) & (w.take(at_r) > 0).all(axis=-1) \
+        w_r = w.take(at_r)
+        valid = (refs >= 0) & (refs != sc[:, None]) & (w_r[..., 0] > 0) & (w_r[..., 1] > 0) \
             & np.isfinite(d_same) & np.isfinite(d_cross)
         better = valid & (d_cross < ratio * d_same)
     n_ok, n_better = valid.sum(axis=1), better.sum(axis=1)
-    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w.take(at_p) > 0).all(axis=-1)
+    w_p = w.take(at_p)
+    out[sc, sk, sf] = (n_better >= 2) & (2 * n_better > n_ok) & (w_p[:, 0] > 0) & (w_p[:, 1] > 0)
     return out
 
 
