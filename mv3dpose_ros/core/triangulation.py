@@ -361,8 +361,8 @@ def swapped_views(u: np.ndarray, v: np.ndarray, w: np.ndarray, essentials: np.nd
     xr = xh.take(at_r, axis=0)                                           # [S, R, 2, 3]
     # contiguous operands: a transposed (strided) one makes these small products much slower
     e = essentials.reshape(-1, 3, 3).take(pair, axis=0)                  # [S, R, 3, 3]
-    lines_p = xr @ np.ascontiguousarray(np.swapaxes(e, -1, -2))  # in the suspect view, of the
-    lines_r = xp @ e                                             # refs; in the refs, of the suspect
+    lines_p = xr @ np.ascontiguousarray(np.swapaxes(e, -1, -2))    # of the refs, in the suspect
+    lines_r = xp @ e                                               # of the suspect, in the refs
     alg = np.abs(xp @ np.ascontiguousarray(np.swapaxes(lines_p, -1, -2)))   # [S, R, i, j]
     with np.errstate(invalid='ignore', divide='ignore'):
         inv_p = 1.0 / np.hypot(lines_p[..., 0], lines_p[..., 1])         # [S, R, j]
