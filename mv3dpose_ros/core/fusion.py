@@ -35,7 +35,7 @@ Units: thresholds on image distances are in normalised image units (pixels / foc
 
 from dataclasses import asdict, dataclass
 import functools
-from itertools import accumulate
+from itertools import accumulate, compress
 import logging
 from typing import Dict, List, Mapping, Optional, Set, Tuple
 
@@ -482,7 +482,7 @@ class Fusion:
                 v = self._filter.v
                 root_ok = ~(missing[:, left] | missing[:, right])
                 velocity = np.where(root_ok[:, None], (v[:, left] + v[:, right]) / 2, velocity)
-        score = confidence.mean(axis=1) if num_j else np.zeros(num_t)
+        score = confidence.sum(axis=1) / num_j if num_j else np.zeros(num_t)     # = mean
         if cfg.max_coast_s > 0:
             fade = 1.0 - (stamp - tr.last_observed) / cfg.max_coast_s
             score = score * np.minimum(np.maximum(fade, 0.0), 1.0)
@@ -490,8 +490,7 @@ class Fusion:
         # per-track Python values in one conversion each (numpy scalars are slow one by one)
         names = self.camera_names
         seen_by = (members >= 0).tolist()
-        view_sets = [tuple(n for n, s in zip(names, seen_by[d]) if s) if d >= 0 else ()
-                     for d in det.tolist()]
+        view_sets = [tuple(compress(names, seen_by[d])) if d >= 0 else () for d in det.tolist()]
         ids, states, hits, missed = (tr.ids.tolist(), tr.state.tolist(), tr.hits.tolist(),
                                      tr.missed.tolist())
         first_seen, last_observed, score = (tr.first_seen.tolist(), tr.last_observed.tolist(),

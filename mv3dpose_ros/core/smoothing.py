@@ -66,7 +66,7 @@ class CausalFilter:
     def reindex(self, previous: np.ndarray) -> None:
         """Rearrange rows: new row ``i`` continues old row ``previous[i]`` (-1 = a new track)."""
         previous = np.asarray(previous, dtype=int)
-        if len(previous) == len(self.x) and (previous == np.arange(len(previous))).all():
+        if len(previous) == len(self.x) and previous.tolist() == list(range(len(previous))):
             return                                      # same tracks in the same rows
         new = previous < 0
         src = np.where(new, 0, previous)
@@ -103,10 +103,10 @@ class CausalFilter:
             jump = (resid * resid) @ self._ones > self.reset_m ** 2      # NaN -> False
             start = obs & (~live | jump)
             second = obs & ~start & (self.count == 1) & (dt > 0)
-            steady = obs & ~start & ~second
-            gap = ~obs & live
-            hold = gap & (stamp - self.last_seen <= self.max_gap_s + 1e-9)
-            x = np.where((start | second)[..., None], z,
+            restart = start | second                    # the position is the observation
+            steady = obs & ~restart
+            hold = ~obs & live & (stamp - self.last_seen <= self.max_gap_s + 1e-9)
+            x = np.where(restart[..., None], z,
                          np.where(steady[..., None], pred + self.alpha * resid,
                                   np.where(hold[..., None], pred, np.nan)))
             gain = self.beta / dt if dt > 0 else 0.0

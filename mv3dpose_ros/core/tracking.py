@@ -276,7 +276,9 @@ class Tracker:
             tr.pose[hit], tr.fresh[hit], tr.velocity[hit] = pose, ok, vel
             tr.hits = tr.hits + hit
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
-        confirm = hit & ((tr.state == _COASTING) | (tr.hits >= cfg.confirm_hits))
+        confirm = (tr.state == _COASTING) | (tr.hits >= cfg.confirm_hits)
+        if not all_hit:
+            confirm &= hit
         tr.state = np.where(confirm, _CONFIRMED, tr.state)
 
 
