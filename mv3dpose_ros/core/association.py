@@ -61,7 +61,7 @@ _Q_SCALE = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
 
 def quadratic_monomials(x: np.ndarray) -> np.ndarray:
     """Return ``(u^2, v^2, 1, 2uv, 2u, 2v)`` of homogeneous points ``[..., 3]`` (z = 1)."""
-    return x.take(_Q_LEFT, axis=-1) * x.take(_Q_RIGHT, axis=-1) * _Q_SCALE
+    return x[..., _Q_LEFT] * x[..., _Q_RIGHT] * _Q_SCALE
 
 
 def symmetric_epipolar_distance(x_new: np.ndarray, x_ref: np.ndarray, essentials: np.ndarray,
