@@ -147,7 +147,6 @@ class Fusion:
             if not isinstance(cam, Camera):
                 raise ValueError(f'camera {name!r} is a {type(cam).__name__}, not a Camera')
         self._index = {n: i for i, n in enumerate(self.camera_names)}
-        self._camera_ids = np.arange(len(self.cameras))
         num_c = len(self.cameras)
         self._essentials = np.zeros((num_c, num_c, 3, 3))
         for a in range(num_c):
@@ -269,7 +268,7 @@ class Fusion:
             _LOG.warning('Fusion: %s', message)
 
     def _prepare(self, views: Mapping[str, np.ndarray]
-                 ) -> Tuple[np.ndarray, np.ndarray, List[int], np.ndarray]:
+                 ) -> Tuple[np.ndarray, np.ndarray, Tuple[int, ...], np.ndarray]:
         """
         Validate the views and normalise all keypoints at once.
 
@@ -301,19 +300,17 @@ class Fusion:
                 arrays.append(arr)
             counts.append(n)
         if not arrays:
-            return (np.full((1, num_j, 3), np.nan), np.zeros((1, num_j)), [0] * (len(counts) + 1),
+            return (np.full((1, num_j, 3), np.nan), np.zeros((1, num_j)), (0,) * (len(counts) + 1),
                     np.zeros(0, dtype=int))
         a = np.concatenate(arrays, axis=0) if len(arrays) > 1 else arrays[0]
         with np.errstate(invalid='ignore'):
             vis = (a[..., 2] >= cfg.min_joint_confidence) & np.isfinite(a).all(axis=-1)
         keep = vis.sum(axis=1) >= cfg.min_pose_joints
-        offsets = list(accumulate(counts, initial=0))
-        cam_of = np.repeat(self._camera_ids, counts)
-        source = np.arange(len(a)) - np.repeat(offsets[:-1], counts)
+        offsets, cam_of, source = _stacking(tuple(counts))
         if not keep.all():
             a, vis, cam_of, source = a[keep], vis[keep], cam_of[keep], source[keep]
             counts = np.bincount(cam_of, minlength=len(counts)).tolist()
-            offsets = list(accumulate(counts, initial=0))
+            offsets = tuple(accumulate(counts, initial=0))
         num_n = offsets[-1]
         k = self._k.take(cam_of, axis=0)[:, None, :]                       # [N, 1, 5]
         y = (a[..., 1] - k[..., 4]) / k[..., 3]
@@ -522,6 +519,22 @@ class Fusion:
                              age=int(dead.hits[i]), missed=int(dead.missed[i]), score=0.0,
                              source_cameras=()))
         return out
+
+
+@functools.lru_cache(maxsize=256)
+def _stacking(counts: Tuple[int, ...]) -> Tuple[Tuple[int, ...], np.ndarray, np.ndarray]:
+    """
+    Return ``(offsets, camera, index)`` of poses stacked from views with ``counts`` poses.
+
+    Offsets are C + 1 ints; ``camera [N]`` and ``index [N]`` (in its view) are read-only.
+    Cached: the same few counts come back frame after frame.
+    """
+    offsets = tuple(accumulate(counts, initial=0))
+    camera = np.repeat(np.arange(len(counts)), counts)
+    index = np.arange(offsets[-1]) - np.repeat(offsets[:-1], counts)
+    camera.setflags(write=False)
+    index.setflags(write=False)
+    return offsets, camera, index
 
 
 @functools.lru_cache(maxsize=None)
