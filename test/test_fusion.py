@@ -148,7 +148,7 @@ def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match='at least two cameras'):
         Fusion(one, 'coco17')
     with pytest.raises(ValueError, match='unknown skeleton layout'):
-        Fusion(scene.cameras, 'coco18')
+        Fusion(scene.cameras, 'mpii16')
 
 
 def test_without_smoothing_outputs_raw_triangulations():
