@@ -303,8 +303,9 @@ class Fusion:
             return (np.full((1, num_j, 3), np.nan), np.zeros((1, num_j)), (0,) * (len(counts) + 1),
                     np.zeros(0, dtype=int))
         a = np.concatenate(arrays, axis=0) if len(arrays) > 1 else arrays[0]
-        with np.errstate(invalid='ignore'):
-            vis = (a[..., 2] >= cfg.min_joint_confidence) & np.isfinite(a).all(axis=-1)
+        finite = np.isfinite(a)             # (three ands beat a last-axis all() of three)
+        vis = finite[..., 0] & finite[..., 1] & finite[..., 2] \
+            & (a[..., 2] >= cfg.min_joint_confidence)
         keep = vis.sum(axis=1) >= cfg.min_pose_joints
         offsets, cam_of, source = _stacking(tuple(counts))
         if not keep.all():
