@@ -16,7 +16,7 @@
 
 from mv3dpose_ros.core.association import (associate, camera_order, gated_assignment,
                                            symmetric_epipolar_distance)
-from mv3dpose_ros.core.camera import essential_matrix
+from mv3dpose_ros.core.camera import essential_matrices
 from mv3dpose_ros.sim.rig import make_rig
 from mv3dpose_ros.sim.scene import make_scene
 import numpy as np
@@ -24,13 +24,7 @@ import pytest
 
 
 def _essentials(cams):
-    names = list(cams)
-    e = np.zeros((len(names), len(names), 3, 3))
-    for a, na in enumerate(names):
-        for b, nb in enumerate(names):
-            if a != b:
-                e[a, b] = essential_matrix(cams[na], cams[nb])
-    return e
+    return essential_matrices(list(cams.values()))
 
 
 def _normalised(cams, joints):

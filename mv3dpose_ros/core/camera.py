@@ -299,6 +299,16 @@ def essential_matrix(a: Camera, b: Camera) -> np.ndarray:
     return _skew(t) @ R
 
 
+def essential_matrices(cameras: Sequence[Camera]) -> np.ndarray:
+    """Return the ``[C, C, 3, 3]`` table of pairwise essential matrices (zero where a = b)."""
+    table = np.zeros((len(cameras), len(cameras), 3, 3))
+    for a, cam_a in enumerate(cameras):
+        for b, cam_b in enumerate(cameras):
+            if a != b:
+                table[a, b] = essential_matrix(cam_a, cam_b)
+    return table
+
+
 def fundamental_matrix(a: Camera, b: Camera) -> np.ndarray:
     """Return F with ``u_b^T F u_a = 0`` for undistorted homogeneous pixels (u, v, 1)."""
     return b._K_inv.T @ essential_matrix(a, b) @ a._K_inv

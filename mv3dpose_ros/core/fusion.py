@@ -41,7 +41,7 @@ from typing import Dict, List, Mapping, Optional, Set, Tuple
 
 from mv3dpose_ros.core.association import (associate_stacked, camera_order,
                                            epipolar_norm_coefficients)
-from mv3dpose_ros.core.camera import Camera, essential_matrix
+from mv3dpose_ros.core.camera import Camera, essential_matrices
 from mv3dpose_ros.core.skeleton import get_layout, Layout
 from mv3dpose_ros.core.smoothing import CausalFilter
 from mv3dpose_ros.core.tracking import centroid, pose_distance, Tracker, TrackerConfig, Tracks
@@ -148,11 +148,7 @@ class Fusion:
                 raise ValueError(f'camera {name!r} is a {type(cam).__name__}, not a Camera')
         self._index = {n: i for i, n in enumerate(self.camera_names)}
         num_c = len(self.cameras)
-        self._essentials = np.zeros((num_c, num_c, 3, 3))
-        for a in range(num_c):
-            for b in range(num_c):
-                if a != b:
-                    self._essentials[a, b] = essential_matrix(self.cameras[a], self.cameras[b])
+        self._essentials = essential_matrices(self.cameras)
         self._norm_coef = epipolar_norm_coefficients(self._essentials)
         self._order = camera_order(np.array([c.R[2] for c in self.cameras]))
         self._projections = np.stack([np.hstack([c.R, c.t[:, None]]) for c in self.cameras])
