@@ -16,6 +16,8 @@
 
 import os
 import random
+import signal
+import subprocess
 import time
 
 import pytest
@@ -54,3 +56,13 @@ def spin_until(executor, predicate, timeout: float = 10.0) -> bool:
             return True
         executor.spin_once(timeout_sec=0.05)
     return bool(predicate())
+
+
+def interrupt(proc: subprocess.Popen, timeout: float) -> int:
+    """Stop ``proc`` as Ctrl-C would; kill it if it has not exited after ``timeout`` s."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait()

@@ -21,11 +21,11 @@ model download is needed: images in, ``persons_2d`` per camera, ``tracks`` from 
 
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
 
+from conftest import interrupt
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.camera import Camera
@@ -141,12 +141,7 @@ def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
         assert all(m.camera_id == c for c in CAMS for m in persons[c])
         assert tracks[-1].header.frame_id == 'map'
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            code = proc.wait(timeout=40)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            code = proc.wait()
+        code = interrupt(proc, 40)
         log.close()
         ex.shutdown()
         node.destroy_node()

@@ -23,11 +23,11 @@ far-future check stays meaningful. Every wait is bounded by a timeout.
 
 import os
 import random
-import signal
 import subprocess
 import sys
 import time
 
+from conftest import interrupt
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
@@ -425,12 +425,7 @@ def test_fusion_node_process_matches_fusion_step(scene, rig_path, tmp_path):
             # Lock step: the complete set is emitted as soon as the last camera arrived.
             assert spin_until(lambda: len(received) > f, 10.0), f'no output for frame {f}'
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            code = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            code = proc.wait()
+        code = interrupt(proc, 10)
         log.close()
         executor.shutdown()
         node.destroy_node()
@@ -475,6 +470,7 @@ def test_use_sim_time_stamps_latency_and_clock_jump(harness_factory, scene):
     assert 0.0 <= h.node.latency.percentile(50) < 0.05
     assert all(st.rejected == {} for st in h.node.cams.values())
     h.diags.clear()
+
     # Node timers run on sim time: /diagnostics comes while /clock advances (0.2 s period).
     def late_diag():
         return [d for d in h.diags if stamp_to_ns(d.header.stamp) >= t0 + NS]
