@@ -19,13 +19,12 @@ Uses a Panoptic HD camera (strong distortion, k1 = -0.29) when ../shared/data is
 otherwise an equivalent synthetic one. Usage: ``python bench/bench_geometry.py [--repeat N]``
 """
 
+import argparse
 import os
+import time
 
 for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ[_var] = '1'
-
-import argparse  # noqa: E402
-import time  # noqa: E402
 
 from mv3dpose_ros.core.calibration import load_calibration  # noqa: E402
 from mv3dpose_ros.core.camera import Camera, fundamental_matrix  # noqa: E402

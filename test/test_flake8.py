@@ -26,6 +26,7 @@ EXCLUDE = ['.venv', 'build', 'install', 'log', '.cache']
 @pytest.mark.flake8
 @pytest.mark.linter
 def test_flake8():
-    argv = ['--exclude'] + [os.path.join(ROOT, e) for e in EXCLUDE] + [ROOT]
+    # '--' ends the nargs='*' --exclude list; without it ROOT itself would be excluded.
+    argv = ['--exclude'] + [os.path.join(ROOT, e) for e in EXCLUDE] + ['--', ROOT]
     rc, errors = main_with_errors(argv=argv)
     assert rc == 0, 'Found %d code style errors / warnings:\n' % len(errors) + '\n'.join(errors)

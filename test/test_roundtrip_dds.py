@@ -57,5 +57,6 @@ def test_samples_differ_from_defaults():
         msg = sample_message(kind, 1)
         default = type(msg)()
         for name in msg.get_fields_and_field_types():
-            assert message_to_dict(getattr(msg, name)) != message_to_dict(getattr(default, name)), \
+            value, unset = getattr(msg, name), getattr(default, name)
+            assert message_to_dict(value) != message_to_dict(unset), \
                 f'{kind}.{name} equals its default value'

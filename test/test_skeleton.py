@@ -20,7 +20,8 @@ import pytest
 
 
 def test_layout_names_and_sizes():
-    sizes = {'coco17': 17, 'coco18': 18, 'body25': 25, 'body25b': 25, 'shelf14': 14, 'panoptic19': 19}
+    sizes = {'coco17': 17, 'coco18': 18, 'body25': 25, 'body25b': 25, 'shelf14': 14,
+             'panoptic19': 19}
     assert set(LAYOUT_NAMES) == set(sizes)
     for name, n in sizes.items():
         layout = get_layout(name)

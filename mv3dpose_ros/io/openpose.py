@@ -237,7 +237,8 @@ def match_camera_folders(root: str, cameras: Sequence[str]) -> Tuple[Dict[str, s
 
     A folder named exactly like the camera wins; otherwise names are compared loosely, so
     Pose2Sim's ``cam01_json`` is camera ``cam_01``, and last by their one number, so
-    ``Camera0`` is camera ``0`` of a VoxelPose calibration. Returns ``(camera -> folder, messages)``
+    ``Camera0`` is camera ``0`` of a VoxelPose calibration. Returns
+    ``(camera -> folder, messages)``
     where messages name cameras without a folder; ambiguous matches raise ValueError listing
     the candidates.
     """
