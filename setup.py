@@ -27,7 +27,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/config',
+         glob('config/*.yaml') + glob('config/*.rviz') + glob('config/*.json')),
         ('share/' + package_name + '/config/rigs', glob('config/rigs/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
@@ -43,8 +44,12 @@ setup(
             'mv3dpose = mv3dpose_ros.cli:main',
             'pose2d_node = mv3dpose_ros.nodes.pose2d_node:main',
             'fusion_node = mv3dpose_ros.nodes.fusion_node:main',
-            'bringup = mv3dpose_ros.nodes.bringup:main',
-            'image_publisher = mv3dpose_ros.nodes.image_publisher:main',
+            'mv3dpose_bringup = mv3dpose_ros.nodes.bringup:main',
+            'mv3dpose_image_publisher = mv3dpose_ros.nodes.image_publisher:main',
+            # Deprecated aliases, kept for one release (0.1.x): generic names that can collide
+            # with other packages' scripts on a PATH. Removed in 0.2.0.
+            'bringup = mv3dpose_ros.nodes.aliases:bringup',
+            'image_publisher = mv3dpose_ros.nodes.aliases:image_publisher',
             'roundtrip_probe = mv3dpose_ros.nodes.roundtrip_probe:main',
         ],
     },

@@ -57,7 +57,7 @@ fi
 # 4. colcon build of both packages (symlink install: Python edits need no rebuild).
 src_hash=$(hash_of requirements.txt setup.py setup.cfg package.xml \
   mv3dpose_msgs/CMakeLists.txt mv3dpose_msgs/package.xml mv3dpose_msgs/msg/*.msg \
-  $(ls config/*.yaml config/rigs/*.yaml launch/*.py 2>/dev/null))
+  $(ls config/*.yaml config/*.rviz config/*.json config/rigs/*.yaml launch/*.py 2>/dev/null))
 if [ "$(cat "$STAMPS/build" 2>/dev/null)" != "$src_hash" ] || [ ! -d install/mv3dpose_msgs ] \
    || [ ! -d install/mv3dpose_ros ]; then
   step 'colcon build (mv3dpose_msgs, mv3dpose_ros)'
