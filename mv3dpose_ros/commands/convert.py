@@ -41,6 +41,7 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 import cv2
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, get_typestore
 from mv3dpose_ros.io.bag import make_qos, STORAGES, temp_path_beside
+from mv3dpose_ros.ros.names import camera_namespace
 import numpy as np
 
 IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp', '.tif', '.tiff', '.ppm', '.pgm')
@@ -50,23 +51,10 @@ TRACKS_TOPIC = '/mv3dpose/tracks'
 TRACKS_TYPE = 'mv3dpose_msgs/msg/TrackedSkeletonArray'
 PERSONS_TYPE = 'mv3dpose_msgs/msg/Person2DArray'
 _DIGITS = re.compile(r'(\d+)')
-_VALID_TOKEN = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 
 
 class ConvertError(ValueError):
     """Input that cannot be converted; the text names the file or folder and the reason."""
-
-
-def camera_namespace(camera: str) -> str:
-    """
-    Return the ROS namespace token of a camera: its name, or ``cam<name>`` if that is invalid.
-
-    ROS name tokens must start with a letter (Panoptic's ``00_03`` cannot), so such cameras
-    live under ``/cam00_03/...``; fusion_node then needs ``input_topic:=/cam{camera}/...``.
-    """
-    if _VALID_TOKEN.match(camera) and '__' not in camera:
-        return camera
-    return 'cam' + re.sub(r'[^A-Za-z0-9_]', '_', camera)
 
 
 def image_topic(camera: str) -> str:

@@ -148,13 +148,8 @@ def _write_params(path: Path, sections: Dict[str, dict]) -> str:
 
 
 def input_topic_pattern(cameras: Sequence[str]) -> str:
-    """Return fusion_node's ``input_topic`` for the namespaces ``persons_topic`` gives."""
-    from mv3dpose_ros.commands.convert import camera_namespace
-    prefixed = {camera_namespace(c) != c for c in cameras}
-    if len(prefixed) > 1:
-        raise DemoError(f'cameras {", ".join(cameras)}: mix names that are valid ROS names '
-                        'with names that are not (digit first); rename them in the calibration')
-    return '/cam{camera}/persons_2d' if prefixed.pop() else '/{camera}/persons_2d'
+    """Return fusion_node's ``input_topic``: ``{camera}`` maps to ``persons_topic``'s names."""
+    return '/{camera}/persons_2d'
 
 
 def _fusion_cmd(params: str) -> List[str]:

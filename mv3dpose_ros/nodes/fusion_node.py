@@ -53,6 +53,7 @@ from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers_cdr
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns_to_stamp,
                                        person2d_array_to_numpy, Persons2D, skeleton_info_msg,
                                        stamp_to_ns, tracks_to_cdr)
+from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
 import numpy as np
@@ -354,14 +355,13 @@ class FusionNode(Node):
 
     def _topic(self, pattern: str, cam: str, param: str) -> str:
         """Return ``pattern`` for camera ``cam``; ConfigError if it is no valid topic name."""
-        topic = pattern.replace('{camera}', cam)
+        topic = camera_topic(pattern, cam)     # {camera} -> the camera's ROS name (ros/names)
         try:
             self.resolve_topic_name(topic)
         except Exception as exc:  # noqa: B902 - rclpy raises RCLError / ValueError variants
             raise ConfigError(
                 f'{param} {pattern!r} gives the invalid topic {topic!r} for camera {cam!r} '
-                f'({exc}); ROS name tokens cannot start with a digit, so for numeric camera '
-                f"ids use a prefix, e.g. {param}:='/cam{{camera}}/...'") from exc
+                f'({exc})') from exc
         return topic
 
     def _publisher(self, msg_type: Any, topic: str, qos: Any) -> Any:
@@ -390,7 +390,7 @@ class FusionNode(Node):
             except (CalibrationError, ValueError) as exc:
                 state.info_problem = f'CameraInfo rejected: {exc}'
                 self._rlog(f'{cam}:camera_info', f'camera {cam}: CameraInfo on '
-                           f'{self.resolve_topic_name(self.camera_info_topic.format(camera=cam))}'
+                           f'{self.resolve_topic_name(camera_topic(self.camera_info_topic, cam))}'
                            f' rejected: {exc}', self._now_ns())
                 return
             rig_cam = self.rig[cam]
