@@ -38,6 +38,7 @@ import threading
 import time
 from typing import Any, Dict, List, Optional, Union
 
+from geometry_msgs.msg import PoseArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import load_calibration
 from mv3dpose_ros.core.camera import CalibrationError, Camera
@@ -49,6 +50,7 @@ from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
+from mv3dpose_ros.ros.frames import Headings, root_pose_array
 from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers_cdr
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns_to_stamp,
                                        person2d_array_to_numpy, Persons2D, skeleton_info_msg,
@@ -56,6 +58,7 @@ from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
+from mv3dpose_ros.ros.tf import TfBridge, TfError
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
@@ -67,6 +70,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 NS_PER_S = 1_000_000_000
@@ -127,6 +131,12 @@ class FusionNode(Node):
         self._lock = threading.RLock()
         self._declare_parameters()
         self._read_parameters()
+        try:   # TF where tf2_ros exists (ros/tf.py): static camera poses, or extrinsics from TF
+            self.tf = TfBridge(self, self.world_frame)
+            self.rig = self.tf.start(self.rig, self.camera_ids, self.get_clock().now().to_msg())
+        except TfError as exc:
+            raise ConfigError(str(exc)) from exc
+        self.headings = Headings(self.layout)
         self._rlog = RateLimitedLog(self.get_logger().warning, self.log_throttle_s)
         self._log_handler = _RosLogHandler(self)
         logging.getLogger('mv3dpose_ros').addHandler(self._log_handler)
@@ -135,6 +145,9 @@ class FusionNode(Node):
         self.markers_pub = self._publisher(MarkerArray, '~/markers', reliable_qos(5))
         self.info_pub = self._publisher(SkeletonInfo, '~/skeleton_info', latched_qos())
         self.info_pub.publish(skeleton_info_msg(self.layout, Header(frame_id=self.world_frame)))
+        # Standard output beside ~/tracks: the root poses of the same skeletons (ros/frames.py).
+        self.poses_pub = self._publisher(PoseArray, '~/poses', reliable_qos(10))
+        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset_request)
 
         self.sync = StreamSynchronizer(self.camera_ids, self.sync_config)
         self.fusion: Optional[Fusion] = None
@@ -572,11 +585,24 @@ class FusionNode(Node):
     def _publish(self, tracks: List[Track], stamp_ns: int) -> None:
         header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)
         self.tracks_pub.publish(tracks_to_cdr(tracks, header, self.layout.name))
+        yaws = self.headings.update(tracks)
+        self.poses_pub.publish(root_pose_array(tracks, yaws, header))
+        self.tf.publish_tracks(tracks, yaws, header)
         self.output_rate.tick()
         self.latency.add((self._now_ns() - stamp_ns) / NS_PER_S)
         if self.markers_enabled and self.markers_pub.get_subscription_count() > 0:
             self.markers_pub.publish(tracks_to_markers_cdr(tracks, self.layout.bones, header,
                                                            self.marker_options))
+
+    def _on_reset_request(self, request: Trigger.Request,
+                          response: Trigger.Response) -> Trigger.Response:
+        """Serve ``~/reset`` (std_srvs/Trigger): clear the synchroniser and the tracks."""
+        with self._lock:
+            count = len(self.last_tracks)
+            self._reset('~/reset service call')
+        response.success = True
+        response.message = f'cleared {count} tracks and the synchroniser'
+        return response
 
     def destroy_node(self) -> None:
         """Detach the logging bridge, then destroy the node."""

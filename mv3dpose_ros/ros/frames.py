@@ -1,0 +1,182 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Coordinate frames of the rig and of the tracked people, as ``geometry_msgs``.
+
+- Cameras: ``world_frame`` -> ``<camera>_optical_frame`` (REP-103 optical frame: x right,
+  y down, z forward), translation = camera centre, rotation = camera -> world. The rig YAML's
+  ``T_world_cam`` is exactly this transform, so a static TF of it and the rig agree.
+- People: ``world_frame`` -> ``<prefix><track_id>`` at the root joint (hip midpoint) with the
+  REP-155 body convention: x forward, y left, z up (the world's). The heading is the yaw of the
+  left-minus-right hip vector turned by -90 degrees; when the hips are missing or too close
+  (< 5 cm apart horizontally) it falls back to the direction of motion (> 0.3 m/s), then to the
+  last heading seen for that track, then to the world's x axis.
+- ``root_pose_array``: the standard ``geometry_msgs/PoseArray`` output, one pose per skeleton of
+  ``~/tracks`` that has a root (DELETED tombstones left out), in the same order and header.
+
+No rclpy here: only message classes, so the functions are testable without a node or DDS.
+"""
+
+import math
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+
+from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped
+from mv3dpose_ros.core.calibration import matrix_to_quaternion, quaternion_to_matrix
+from mv3dpose_ros.core.camera import CalibrationError, Camera
+from mv3dpose_ros.core.skeleton import Layout
+from mv3dpose_ros.core.types import Track, TrackState
+import numpy as np
+from std_msgs.msg import Header
+
+MIN_HIP_WIDTH_M = 0.05       # horizontal hip distance below which the hips give no heading
+MIN_SPEED_MPS = 0.3          # speed above which the direction of motion gives the heading
+OPTICAL_FRAME = '{camera}_optical_frame'
+
+
+def optical_frame(camera: str, template: str = OPTICAL_FRAME) -> str:
+    """Return the frame id of ``camera`` from ``template`` (``{camera}`` = the camera id)."""
+    return template.format(camera=camera)
+
+
+def quaternion_from_yaw(yaw: float) -> Quaternion:
+    """Return the rotation by ``yaw`` radians about +z as a ``geometry_msgs/Quaternion``."""
+    return Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
+
+
+def yaw_from_quaternion(q: Quaternion) -> float:
+    """Return the yaw (rotation about +z) of a quaternion, in radians."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def body_yaw(track: Track, layout: Layout) -> Optional[float]:
+    """Return the heading of a person (REP-155 body x axis) in radians, None when unknown."""
+    left, right = layout.root_joints
+    lr = np.asarray(track.joints, dtype=np.float64)[left] - \
+        np.asarray(track.joints, dtype=np.float64)[right]
+    valid = np.asarray(track.valid)
+    if valid[left] and valid[right] and np.all(np.isfinite(lr)) and \
+            math.hypot(lr[0], lr[1]) >= MIN_HIP_WIDTH_M:
+        return math.atan2(lr[1], lr[0]) - 0.5 * math.pi   # y (left) axis -> x (forward)
+    v = np.asarray(track.velocity, dtype=np.float64)
+    if np.all(np.isfinite(v[:2])) and math.hypot(v[0], v[1]) >= MIN_SPEED_MPS:
+        return math.atan2(v[1], v[0])
+    return None
+
+
+class Headings:
+    """Per-track heading with memory: a track keeps its last heading while its hips are unseen."""
+
+    def __init__(self, layout: Layout) -> None:
+        self.layout = layout
+        self._last: Dict[int, float] = {}
+
+    def update(self, tracks: Iterable[Track]) -> List[Optional[float]]:
+        """
+        Return one yaw (or None) per track.
+
+        Call it with every track of each output: tracks absent from the call or DELETED are
+        forgotten, so the memory holds only the live tracks.
+        """
+        out: List[Optional[float]] = []
+        last: Dict[int, float] = {}
+        for t in tracks:
+            if t.state == TrackState.DELETED:
+                out.append(None)
+                continue
+            yaw = body_yaw(t, self.layout)
+            if yaw is None:
+                yaw = self._last.get(t.track_id)
+            if yaw is not None:
+                last[t.track_id] = yaw
+            out.append(yaw)
+        self._last = last
+        return out
+
+    def clear(self) -> None:
+        """Forget every track."""
+        self._last.clear()
+
+
+def _transform(header: Header, child: str, xyz: Sequence[float],
+               q: Quaternion) -> TransformStamped:
+    msg = TransformStamped(header=Header(stamp=header.stamp, frame_id=header.frame_id),
+                           child_frame_id=child)
+    tr = msg.transform.translation
+    tr.x, tr.y, tr.z = (float(v) for v in xyz)
+    msg.transform.rotation = q
+    return msg
+
+
+def camera_transforms(cameras: Mapping[str, Camera], header: Header,
+                      template: str = OPTICAL_FRAME) -> List[TransformStamped]:
+    """Return ``header.frame_id`` -> optical frame of each camera (pose of the camera)."""
+    out = []
+    for name, cam in cameras.items():
+        x, y, z, w = (float(v) for v in matrix_to_quaternion(cam.R_world_cam))
+        out.append(_transform(header, optical_frame(name, template), cam.center,
+                              Quaternion(x=x, y=y, z=z, w=w)))
+    return out
+
+
+def camera_from_transform(camera: Camera, tf: TransformStamped) -> Camera:
+    """Return ``camera`` (intrinsics kept) placed at the pose ``tf`` (world -> optical frame)."""
+    r, p = tf.transform.rotation, tf.transform.translation
+    q = np.array([r.x, r.y, r.z, r.w], dtype=np.float64)
+    norm = float(np.linalg.norm(q))
+    if not math.isfinite(norm) or abs(norm - 1.0) > 1e-3:
+        raise CalibrationError(f'rotation of {tf.header.frame_id} -> {tf.child_frame_id} is not '
+                               f'a unit quaternion (norm {norm:.6g})', camera=camera.name,
+                               field='tf rotation')
+    return Camera.from_pose(camera.name, camera.K, camera.dist, quaternion_to_matrix(q),
+                            [p.x, p.y, p.z], camera.width, camera.height)
+
+
+def _root(track: Track) -> Optional[Tuple[float, float, float]]:
+    xyz = np.asarray(track.position, dtype=np.float64)
+    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
+        return None
+    return float(xyz[0]), float(xyz[1]), float(xyz[2])
+
+
+def track_transforms(tracks: Sequence[Track], yaws: Sequence[Optional[float]], header: Header,
+                     prefix: str) -> List[TransformStamped]:
+    """Return ``header.frame_id`` -> ``<prefix><id>`` for each CONFIRMED/COASTING track."""
+    out = []
+    for t, yaw in zip(tracks, yaws):
+        root = _root(t)
+        if t.state not in (TrackState.CONFIRMED, TrackState.COASTING) or root is None:
+            continue
+        out.append(_transform(header, f'{prefix}{t.track_id}', root,
+                              quaternion_from_yaw(yaw or 0.0)))
+    return out
+
+
+def root_pose_array(tracks: Sequence[Track], yaws: Sequence[Optional[float]],
+                    header: Header) -> PoseArray:
+    """
+    Return the standard output: the root pose of each skeleton published on ``~/tracks``.
+
+    One pose per non-DELETED track with a known root, in the order of ``tracks`` (the order of
+    ``TrackedSkeletonArray.skeletons``); orientation = heading (identity when unknown).
+    """
+    msg = PoseArray(header=header)
+    for t, yaw in zip(tracks, yaws):
+        root = _root(t)
+        if t.state == TrackState.DELETED or root is None:
+            continue
+        pose = Pose(orientation=quaternion_from_yaw(yaw or 0.0))
+        pose.position.x, pose.position.y, pose.position.z = root
+        msg.poses.append(pose)
+    return msg
