@@ -16,7 +16,8 @@
 CDR fast paths of ``ros/messages.py`` checked against rclpy's own (de)serialisation (no DDS).
 
 The decoder must read exactly what ``rclpy.serialization.serialize_message`` writes, for any
-content, and refuse anything truncated or inconsistent with a 'malformed' ``InvalidMessage``.
+content, and accept exactly the bytes rclpy's deserialiser accepts (decoding them to the same
+values); what rclpy refuses it refuses with a 'malformed' ``InvalidMessage``.
 """
 
 import math
@@ -123,15 +124,101 @@ def test_decoder_reads_big_endian_cdr():
         assert_same(decode_person2d_array(data), msg)
 
 
-def test_every_truncation_is_rejected_as_malformed():
+def _rclpy_reads(data: bytes):
+    """Return rclpy's message for ``data``, or None where rclpy refuses it."""
+    try:
+        return deserialize_message(data, Person2DArray)
+    except Exception:  # noqa: B902 - rclpy raises RMWError and friends
+        return None
+
+
+def _same_or_nan(decoded: Persons2D, msg: Person2DArray) -> None:
+    """
+    Every field of ``decoded`` equals ``msg``; floats by value with NaN equal to NaN.
+
+    rclpy hands float32 fields through a Python float (double), which quiets signalling NaNs,
+    so their bits may differ; every other float is compared exactly.
+    """
+    flat = np.array([(k.x, k.y, k.confidence) for p in msg.persons for k in p.keypoints],
+                    dtype=np.float32).reshape(-1, 3)
+    assert decoded.keypoints.dtype == np.float32
+    np.testing.assert_array_equal(decoded.keypoints, flat)
+    np.testing.assert_array_equal(decoded.scores,
+                                  np.array([p.score for p in msg.persons], np.float32))
+    stamp = msg.header.stamp
+    assert decoded.stamp_ns == stamp.sec * 1_000_000_000 + stamp.nanosec
+    assert (decoded.frame_id, decoded.camera_id, decoded.layout) == (
+        msg.header.frame_id, msg.camera_id, msg.layout)
+    assert (decoded.image_width, decoded.image_height) == (msg.image_width, msg.image_height)
+    assert decoded.counts.tolist() == [len(p.keypoints) for p in msg.persons]
+    assert decoded.rois.tolist() == [[p.roi.x_offset, p.roi.y_offset, p.roi.height,
+                                      p.roi.width, int(p.roi.do_rectify)] for p in msg.persons]
+    assert decoded.ids == [p.id for p in msg.persons]
+
+
+def mutated_buffers(seed: int, count: int):
+    """Yield ``count`` deterministic mutations of serialised random messages."""
+    rng = np.random.default_rng(seed)
+    bases = [bytes(serialize_message(random_person2d_array(rng))) for _ in range(30)]
+    for _ in range(count):
+        b = bytearray(bases[rng.integers(len(bases))])
+        for _ in range(int(rng.choice([1, 1, 2, 3]))):
+            if len(b) < 8:
+                break
+            kind = rng.integers(7)
+            p = int(rng.integers(len(b)))
+            w = int(rng.integers(0, len(b) - 4)) & ~3
+            if kind == 0:
+                b[p] ^= 1 << int(rng.integers(8))       # bit flip
+            elif kind == 1:
+                b = b[:p]                               # truncation
+            elif kind == 2:
+                b += rng.bytes(int(rng.integers(1, 9)))  # trailing bytes
+            elif kind == 3:
+                b[p] = int(rng.integers(256))           # byte
+            elif kind == 4:
+                b[w:w + 4] = rng.bytes(4)               # any word (lengths, counts)
+            elif kind == 5:
+                b[w:w + 4] = int(rng.integers(64)).to_bytes(4, 'little')  # small count
+            else:
+                b[0] = int(rng.choice([0, 0, 0, 1, 0x80]))  # encapsulation
+                b[1] = int(rng.integers(256 if rng.random() < 0.2 else 16))
+        yield bytes(b)
+
+
+def test_decoder_accepts_exactly_what_rclpy_accepts_on_mutated_buffers():
+    """One decoder path: on 4000 mutated buffers the fast decoder and rclpy agree."""
+    agree = accepted = 0
+    for data in mutated_buffers(2026, 4000):
+        msg = _rclpy_reads(data)
+        try:
+            decoded = decode_person2d_array(data)
+        except InvalidMessage as exc:
+            assert msg is None, f'rclpy reads what the decoder refuses ({exc}): {data.hex()}'
+            assert exc.reason == 'malformed'
+        else:
+            assert msg is not None, f'the decoder reads what rclpy refuses: {data.hex()}'
+            _same_or_nan(decoded, msg)
+            accepted += 1
+        agree += 1
+    assert agree == 4000 and 1000 < accepted < 3900   # the corpus has both kinds
+
+
+def test_every_truncation_is_read_or_refused_as_rclpy_does():
     rng = np.random.default_rng(11)
-    for _ in range(10):
-        msg = random_person2d_array(rng)
-        data = serialize_message(msg)
+    refused = 0
+    for _ in range(6):
+        data = serialize_message(random_person2d_array(rng))
         for cut in range(len(data)):
-            with pytest.raises(InvalidMessage, match='malformed Person2DArray CDR') as info:
-                decode_person2d_array(data[:cut])
-            assert info.value.reason == 'malformed'
+            msg = _rclpy_reads(data[:cut])
+            if msg is None:
+                with pytest.raises(InvalidMessage, match='malformed Person2DArray CDR') as info:
+                    decode_person2d_array(data[:cut])
+                assert info.value.reason == 'malformed'
+                refused += 1
+            else:
+                _same_or_nan(decode_person2d_array(data[:cut]), msg)
+    assert refused > 100
 
 
 def _valid_message():
@@ -140,7 +227,7 @@ def _valid_message():
                          persons=[Person2D(id='p', keypoints=kps) for _ in range(3)])
 
 
-def test_inconsistent_bytes_are_rejected_with_the_reason():
+def test_rclpy_quirks_are_read_alike():
     data = bytearray(serialize_message(_valid_message()))
     # persons count (after header 4+8+4+1 -> 20, camera_id 4+5 -> 29, pad -> 32, sizes 8,
     # layout 4+7 -> 51, pad -> 52): a huge count fails at once instead of looping.
@@ -148,26 +235,41 @@ def test_inconsistent_bytes_are_rejected_with_the_reason():
     huge[52:56] = (2**31).to_bytes(4, 'little')
     with pytest.raises(InvalidMessage, match='persons cannot fit'):
         decode_person2d_array(bytes(huge))
-    with pytest.raises(InvalidMessage, match='bytes after the last person'):
-        decode_person2d_array(bytes(data) + bytes(8))
-    with pytest.raises(InvalidMessage, match='expected plain CDR'):
-        decode_person2d_array(b'\x00\x07\x00\x00' + bytes(data[4:]))      # XCDR2
+    assert _rclpy_reads(bytes(huge)) is None
     with pytest.raises(InvalidMessage, match='encapsulation none'):
         decode_person2d_array(b'')
+    for kind in (4, 5, 12, 255):
+        with pytest.raises(InvalidMessage, match='encapsulation'):
+            decode_person2d_array(bytes([0, kind]) + bytes(data[2:]))
+    cases = {'trailing': bytes(data) + bytes(8),
+             'xcdr2': b'\x00\x07\x00\x00' + bytes(data[4:]),
+             'pl_cdr': b'\x00\x03\xff\xff' + bytes(data[4:])}
     not_nul = bytearray(data)
     not_nul[28] = ord('x')                      # camera_id's terminating NUL
-    with pytest.raises(InvalidMessage, match='not NUL-terminated'):
-        decode_person2d_array(bytes(not_nul))
+    cases['not_nul'] = bytes(not_nul)
     bad_utf8 = bytearray(data)
     bad_utf8[24] = 0xff                          # first byte of camera_id
-    with pytest.raises(InvalidMessage, match='not UTF-8'):
-        decode_person2d_array(bytes(bad_utf8))
-    # rclpy refuses the impossible count (the node drops it as malformed) but is lenient with
-    # the string problems and trailing bytes: the node then uses rclpy's reading instead.
-    with pytest.raises(Exception, match='deserialize'):
-        deserialize_message(bytes(huge), Person2DArray)
-    assert deserialize_message(bytes(not_nul), Person2DArray).camera_id == 'cam0x'
-    assert deserialize_message(bytes(data) + bytes(8), Person2DArray).camera_id == 'cam0'
+    cases['bad_utf8'] = bytes(bad_utf8)
+    inner_nul = bytearray(data)
+    inner_nul[25] = 0
+    cases['inner_nul'] = bytes(inner_nul)
+    # the last person's keypoint count beyond the bytes left: an empty sequence for both
+    last = bytearray(data)
+    at = len(data) - 17 * 12 - 4
+    last[at:at + 4] = (10**6).to_bytes(4, 'little')
+    cases['count'] = bytes(last)
+    bool_two = bytearray(data)
+    bool_two[56 + 16] = 2                        # first person's roi.do_rectify
+    cases['bool'] = bytes(bool_two)
+    for name, raw in cases.items():
+        msg = _rclpy_reads(raw)
+        assert msg is not None, name
+        assert_same(decode_person2d_array(raw), msg)
+    assert decode_person2d_array(cases['not_nul']).camera_id == 'cam0x'
+    assert decode_person2d_array(cases['bad_utf8']).camera_id == '\ufffdam0'
+    assert decode_person2d_array(cases['inner_nul']).camera_id == 'c'
+    assert decode_person2d_array(cases['count']).counts.tolist() == [17, 17, 0]
+    assert decode_person2d_array(cases['bool']).rois[0, 4] == 1
 
 
 @pytest.mark.parametrize('kind,reason', [('count', 'keypoint_count'), ('nan', 'non_finite'),

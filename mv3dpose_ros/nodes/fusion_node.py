@@ -23,8 +23,8 @@ capture time, in the world frame), ``~/markers`` (RViz, only when subscribed), a
 dropped with a rate-limited log line naming the camera, topic and reason, and counted in the
 diagnostics, so it can neither stop the node nor reach the tracker.
 
-Inputs are taken as raw CDR and read by ``decode_person2d_array`` (rclpy's deserialiser only
-when it refuses: bytes neither can read are dropped as 'malformed'); ``~/tracks`` and
+Inputs are taken as raw CDR and read by ``decode_person2d_array``, which accepts exactly what
+rclpy's deserialiser accepts (bytes it refuses are dropped as 'malformed'); ``~/tracks`` and
 ``~/markers`` are serialised straight to CDR. Both skip one Python object per keypoint, joint
 or point, which was most of the node's own cost.
 """
@@ -67,7 +67,6 @@ from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -91,7 +90,6 @@ class _Camera:
         self.accepted = 0
         self.rejected: Counter = Counter()     # reason -> count (never reset)
         self.rejected_reported: Counter = Counter()   # snapshot at the last diagnostics cycle
-        self.decoded_by_rclpy = 0              # CDR the fast decoder refused but rclpy read
         self.freq = FrequencyStats()
         self.stamps = TimestampStats()
         self.last_rx_ns: Optional[int] = None
@@ -428,16 +426,8 @@ class FusionNode(Node):
                    f'on {state.topic}: {text}', now_ns)
 
     def _decode(self, state: _Camera, data: bytes) -> Union[Persons2D, Person2DArray]:
-        """Decode raw CDR; on refusal let rclpy try (InvalidMessage 'malformed' if it fails)."""
-        try:
-            return decode_person2d_array(data)
-        except InvalidMessage as exc:
-            try:
-                msg = deserialize_message(bytes(data), Person2DArray)
-            except Exception:  # noqa: B902 - rclpy raises RMWError and friends
-                raise exc from None
-            state.decoded_by_rclpy += 1
-            return msg
+        """Decode raw CDR (InvalidMessage 'malformed' for bytes rclpy would refuse too)."""
+        return decode_person2d_array(data)
 
     def _validate(self, state: _Camera, msg: Union[Persons2D, Person2DArray], stamp_ns: int,
                   now_ns: int):
@@ -624,7 +614,6 @@ class FusionNode(Node):
                 t_level, t_msg, t_values = st.stamps.sample()
                 values = {'topic': st.topic, **values, **t_values,
                           'received': st.received, 'accepted': st.accepted,
-                          'decoded by rclpy (fallback)': st.decoded_by_rclpy,
                           'used in sets': ss.used, 'dropped by sync': ss.dropped,
                           'late': ss.late, 'missing from sets': ss.missing,
                           'offset mean (ms)': ss.offset_mean_s * 1e3,
