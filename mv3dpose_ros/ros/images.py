@@ -13,28 +13,67 @@
 # limitations under the License.
 
 """
-``sensor_msgs/Image`` and ``CameraInfo`` <-> numpy without cv_bridge (not in the wheels).
+``sensor_msgs/Image``, ``CompressedImage`` and ``CameraInfo`` <-> numpy without cv_bridge.
 
-Only 8-bit encodings are supported: ``bgr8``, ``rgb8``, ``mono8`` (and their OpenCV aliases
-``8UC3`` = bgr8, ``8UC1`` = mono8). Row padding (``step`` > width x channels) is handled; the
-returned array is a view on the message buffer when possible (no copy).
+``image_to_numpy`` returns what the pose estimators take (uint8, order 'bgr' | 'rgb' | 'gray')
+from the encodings camera drivers publish: ``bgr8``, ``rgb8``, ``mono8``, ``bgra8``, ``rgba8``
+(alpha dropped), ``mono16`` (scaled to 8 bits by its bit depth: 10-, 12- and 16-bit sensors keep
+their brightness), ``yuv422`` (UYVY) and ``yuv422_yuy2`` (YUYV), plus the OpenCV aliases
+``8UC1``, ``8UC3`` (= bgr8), ``8UC4`` (= bgra8) and ``16UC1`` (= mono16). Row padding
+(``step`` > width x bytes per pixel) is handled; 8-bit colour and grey arrays are views on the
+message buffer (no copy).
+
+``compressed_to_numpy`` decodes ``image_transport``'s ``<image>/compressed`` (JPEG or PNG;
+``format`` like ``bgr8; jpeg compressed bgr8``); ``numpy_to_compressed`` writes the same.
 """
 
 import struct
-from typing import Any, Optional, Tuple, Union
+from typing import Any, Callable, Optional, Tuple, Union
 
 from builtin_interfaces.msg import Time
+import cv2
 import numpy as np
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header
 
-#: encoding -> (channels, channel order understood by the pose estimators)
+#: encodings numpy_to_image writes: encoding -> (channels, channel order)
 ENCODINGS = {'bgr8': (3, 'bgr'), 'rgb8': (3, 'rgb'), 'mono8': (1, 'gray'),
              '8UC3': (3, 'bgr'), '8UC1': (1, 'gray')}
+
+#: every encoding image_to_numpy reads: encoding -> (bytes per pixel, channels in the buffer)
+READ_ENCODINGS = {**{k: (c, c) for k, (c, _) in ENCODINGS.items()},
+                  'bgra8': (4, 4), 'rgba8': (4, 4), '8UC4': (4, 4),
+                  'mono16': (2, 1), '16UC1': (2, 1),
+                  'yuv422': (2, 2), 'uyvy': (2, 2), 'yuv422_yuy2': (2, 2), 'yuyv': (2, 2)}
+_ORDER = {'bgr8': 'bgr', '8UC3': 'bgr', 'rgb8': 'rgb', 'mono8': 'gray', '8UC1': 'gray',
+          'bgra8': 'bgr', '8UC4': 'bgr', 'rgba8': 'rgb', 'mono16': 'gray', '16UC1': 'gray',
+          'yuv422': 'bgr', 'uyvy': 'bgr', 'yuv422_yuy2': 'bgr', 'yuyv': 'bgr'}
+_YUV = {'yuv422': cv2.COLOR_YUV2BGR_UYVY, 'uyvy': cv2.COLOR_YUV2BGR_UYVY,
+        'yuv422_yuy2': cv2.COLOR_YUV2BGR_YUY2, 'yuyv': cv2.COLOR_YUV2BGR_YUY2}
 
 
 class ImageError(ValueError):
     """An image message the pipeline cannot read; the text says which field and why."""
+
+
+def _align4(p: int) -> int:
+    return 4 + ((p - 4 + 3) & ~3)
+
+
+def _cdr_reader(buf: bytes, what: str) -> Tuple[memoryview, str, Callable[[int], Tuple[str, int]]]:
+    """Return the view, the struct byte order and a CDR string reader of plain-CDR ``buf``."""
+    view = memoryview(buf)
+    if len(view) < 8 or view[0] != 0 or view[1] not in (0, 1):
+        raise ImageError(f'not a plain CDR {what}')
+    end = '<' if view[1] == 1 else '>'
+
+    def string(p: int) -> Tuple[str, int]:
+        p = _align4(p)
+        (n,) = struct.unpack_from(end + 'I', view, p)
+        text = bytes(view[p + 4:p + 4 + max(0, n - 1)]).decode('utf-8')
+        return text, p + 4 + n
+
+    return view, end, string
 
 
 def parse_image_cdr(buf: bytes) -> Tuple[Image, memoryview]:
@@ -46,21 +85,9 @@ def parse_image_cdr(buf: bytes) -> Tuple[Image, memoryview]:
     1 ms per 1080p frame. Raises ``ImageError`` for anything but plain little/big-endian CDR
     (callers fall back to ``rclpy.serialization.deserialize_message``).
     """
-    view = memoryview(buf)
-    if len(view) < 8 or view[0] != 0 or view[1] not in (0, 1):
-        raise ImageError('not a plain CDR sensor_msgs/Image')
-    end = '<' if view[1] == 1 else '>'
+    view, end, string = _cdr_reader(buf, 'sensor_msgs/Image')
     pos = 4
-
-    def align4(p: int) -> int:
-        return 4 + ((p - 4 + 3) & ~3)
-
-    def string(p: int) -> Tuple[str, int]:
-        p = align4(p)
-        (n,) = struct.unpack_from(end + 'I', view, p)
-        text = bytes(view[p + 4:p + 4 + max(0, n - 1)]).decode('utf-8')
-        return text, p + 4 + n
-
+    align4 = _align4
     try:
         sec, nanosec = struct.unpack_from(end + 'iI', view, pos)
         frame_id, pos = string(pos + 8)
@@ -81,6 +108,38 @@ def parse_image_cdr(buf: bytes) -> Tuple[Image, memoryview]:
     return msg, view[pos:pos + size]
 
 
+def parse_compressed_cdr(buf: bytes) -> Tuple[CompressedImage, memoryview]:
+    """
+    Read a serialised ``sensor_msgs/CompressedImage`` (plain CDR) without copying its data.
+
+    Returns the message with empty ``data`` plus a view of the compressed bytes; raises
+    ``ImageError`` for anything but plain CDR (fall back to ``deserialize_message``).
+    """
+    view, end, string = _cdr_reader(buf, 'sensor_msgs/CompressedImage')
+    try:
+        sec, nanosec = struct.unpack_from(end + 'iI', view, 4)
+        frame_id, pos = string(12)
+        fmt, pos = string(pos)
+        pos = _align4(pos)
+        (size,) = struct.unpack_from(end + 'I', view, pos)
+    except (struct.error, IndexError, UnicodeDecodeError) as exc:
+        raise ImageError(f'truncated or malformed sensor_msgs/CompressedImage CDR: '
+                         f'{exc}') from None
+    pos += 4
+    if pos + size > len(view):
+        raise ImageError(f'CompressedImage CDR declares {size} data bytes, {len(view) - pos} '
+                         'present')
+    msg = CompressedImage(header=Header(stamp=Time(sec=sec, nanosec=nanosec),
+                                        frame_id=frame_id), format=fmt)
+    return msg, view[pos:pos + size]
+
+
+def _unsupported(encoding: str) -> ImageError:
+    return ImageError(f'unsupported image encoding {encoding!r}; supported: '
+                      f'{", ".join(READ_ENCODINGS)} (convert upstream, e.g. debayer with '
+                      'image_proc, or publish bgr8)')
+
+
 def image_to_numpy(msg: Image, data: Union[bytes, memoryview, None] = None
                    ) -> Tuple[np.ndarray, str]:
     """
@@ -89,23 +148,83 @@ def image_to_numpy(msg: Image, data: Union[bytes, memoryview, None] = None
     ``data`` replaces ``msg.data`` (the pixel view from ``parse_image_cdr``). Raises
     ``ImageError`` for unsupported encodings and inconsistent sizes.
     """
-    if msg.encoding not in ENCODINGS:
-        raise ImageError(f'unsupported image encoding {msg.encoding!r}; supported: '
-                         f'{", ".join(ENCODINGS)} (convert upstream, e.g. debayer / '
-                         f'image_proc, or publish bgr8)')
-    channels, order = ENCODINGS[msg.encoding]
+    encoding = msg.encoding
+    if encoding not in READ_ENCODINGS:
+        raise _unsupported(encoding)
+    size, channels = READ_ENCODINGS[encoding]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     if h <= 0 or w <= 0:
         raise ImageError(f'empty image {w}x{h}')
-    if step < w * channels:
-        raise ImageError(f'step {step} < width {w} x {channels} channels')
+    if step < w * size:
+        raise ImageError(f'step {step} < width {w} x {size} bytes per pixel ({encoding})')
+    if encoding in _YUV and w % 2:
+        raise ImageError(f'{encoding} needs an even width, got {w}')
     buf = np.frombuffer(msg.data if data is None else data, dtype=np.uint8)
     if buf.size < h * step:
         raise ImageError(f'image data has {buf.size} bytes, expected height {h} x step {step}'
                          f' = {h * step}')
-    rows = buf[:h * step].reshape(h, step)[:, :w * channels]
-    arr = rows.reshape(h, w, channels) if channels == 3 else rows.reshape(h, w)
-    return arr, order
+    rows = buf[:h * step].reshape(h, step)[:, :w * size]
+    order = _ORDER[encoding]
+    if size == 2 and channels == 1:                   # mono16: to 8 bits by its bit depth
+        wide = rows.view('>u2' if msg.is_bigendian else '<u2').reshape(h, w)
+        bits = max(8, int(wide.max()).bit_length())
+        return (wide >> (bits - 8)).astype(np.uint8), order
+    if encoding in _YUV:
+        return cv2.cvtColor(rows.reshape(h, w, 2), _YUV[encoding]), order
+    if channels == 1:
+        return rows.reshape(h, w), order
+    if channels == 4:                                 # bgra8 / rgba8: drop alpha (one copy)
+        return np.ascontiguousarray(rows.reshape(h, w, 4)[:, :, :3]), order
+    return rows.reshape(h, w, 3), order
+
+
+def compressed_to_numpy(msg: CompressedImage, data: Union[bytes, memoryview, None] = None
+                        ) -> Tuple[np.ndarray, str]:
+    """
+    Decode a ``CompressedImage`` (JPEG or PNG) to ``(array, order)`` like ``image_to_numpy``.
+
+    ``format`` is image_transport's ``'<encoding>; jpeg compressed <encoding>'`` (or just
+    ``jpeg`` / ``png``); mono sources decode to grey, others to BGR. ``compressedDepth`` and
+    bytes OpenCV cannot decode raise ``ImageError``.
+    """
+    fmt = str(msg.format).strip()
+    if 'compressedDepth' in fmt:
+        raise ImageError(f'CompressedImage format {fmt!r} is a depth image, not a camera image')
+    raw = np.frombuffer(msg.data if data is None else data, dtype=np.uint8)
+    if raw.size == 0:
+        raise ImageError(f'empty CompressedImage (format {fmt!r})')
+    source = fmt.split(';', 1)[0].strip().lower()
+    gray = source.startswith('mono') or source in ('8uc1', '16uc1')
+    image = cv2.imdecode(raw, cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
+    if image is None:
+        raise ImageError(f'cannot decode CompressedImage ({raw.size} bytes, format {fmt!r}): '
+                         'not JPEG or PNG, or truncated')
+    return image, 'gray' if image.ndim == 2 else 'bgr'
+
+
+def numpy_to_compressed(array: np.ndarray, header: Optional[Header] = None,
+                        fmt: str = 'jpeg', quality: int = 90) -> CompressedImage:
+    """
+    Build a ``CompressedImage`` as ``compressed_image_transport`` does (format string included).
+
+    ``array`` is uint8 BGR ``[H, W, 3]`` or grey ``[H, W]``; ``fmt`` 'jpeg' or 'png'.
+    """
+    if fmt not in ('jpeg', 'png'):
+        raise ImageError(f"compressed format must be 'jpeg' or 'png', got {fmt!r}")
+    array = np.ascontiguousarray(array)
+    if array.dtype != np.uint8 or array.ndim not in (2, 3):
+        raise ImageError(f'image array must be uint8 [H, W(, 3)], got {array.dtype} '
+                         f'{array.shape}')
+    encoding = 'mono8' if array.ndim == 2 else 'bgr8'
+    params = ([cv2.IMWRITE_JPEG_QUALITY, int(quality)] if fmt == 'jpeg' else
+              [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    ok, data = cv2.imencode('.jpg' if fmt == 'jpeg' else '.png', array, params)
+    if not ok:
+        raise ImageError(f'OpenCV could not encode a {array.shape} image as {fmt}')
+    msg = CompressedImage(header=header or Header(),
+                          format=f'{encoding}; {fmt} compressed {encoding}')
+    msg.data = data.tobytes()
+    return msg
 
 
 def numpy_to_image(array: np.ndarray, header: Optional[Header] = None,

@@ -1,0 +1,154 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Image messages -> numpy: the encodings camera drivers publish, and CompressedImage."""
+
+import os
+
+import cv2
+from mv3dpose_ros.ros.images import (compressed_to_numpy, image_to_numpy, ImageError,
+                                     numpy_to_compressed, numpy_to_image, parse_compressed_cdr,
+                                     parse_image_cdr)
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Header
+
+
+@pytest.fixture(scope='module')
+def frame(shared_data):
+    """A real 1920x1080 Panoptic frame, cropped to keep the tests quick."""
+    img = cv2.imread(os.path.join(shared_data, 'panoptic_demo', '00_03', '00_03_00004500.jpg'))
+    return np.ascontiguousarray(img[300:540, 800:1120])      # 320 x 240, people in it
+
+
+def _image(array, encoding, bigendian=0, pad=0):
+    h, w = array.shape[:2]
+    rows = array.reshape(h, -1).view(np.uint8)
+    step = rows.shape[1] + pad
+    data = np.zeros((h, step), np.uint8)
+    data[:, :rows.shape[1]] = rows
+    return Image(height=h, width=w, encoding=encoding, is_bigendian=bigendian, step=step,
+                 data=data.tobytes())
+
+
+def _uyvy(bgr, yuy2=False):
+    """Pack BGR into UYVY (ROS yuv422) or YUYV (yuv422_yuy2), BT.601 video range like a camera."""
+    h, w = bgr.shape[:2]
+    i420 = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420)        # Y plane, then U and V at h/2, w/2
+    y = i420[:h]
+    chroma = i420[h:].reshape(2, h // 2, w // 2)
+    u, v = (np.repeat(c, 2, axis=0) for c in chroma)        # 4:2:0 -> 4:2:2 rows
+    out = np.empty((h, w, 2), np.uint8)
+    out[..., 0 if yuy2 else 1] = y
+    out[:, 0::2, 1 if yuy2 else 0] = u
+    out[:, 1::2, 1 if yuy2 else 0] = v
+    return out
+
+
+@pytest.mark.parametrize('encoding', ['bgra8', 'rgba8', '8UC4'])
+def test_four_channel_encodings_drop_alpha(frame, encoding):
+    rgb = encoding == 'rgba8'
+    four = cv2.cvtColor(frame, cv2.COLOR_BGR2RGBA if rgb else cv2.COLOR_BGR2BGRA)
+    four[..., 3] = 7
+    arr, order = image_to_numpy(_image(four, encoding, pad=8))
+    assert order == ('rgb' if rgb else 'bgr') and arr.shape == frame.shape
+    assert arr.flags['C_CONTIGUOUS']
+    assert np.array_equal(arr[..., ::-1] if rgb else arr, frame)
+
+
+@pytest.mark.parametrize('bits, bigendian', [(16, 0), (12, 0), (10, 1)])
+def test_mono16_scaled_by_its_bit_depth(frame, bits, bigendian):
+    gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+    wide = (gray.astype(np.uint16) << (bits - 8)).astype('>u2' if bigendian else '<u2')
+    arr, order = image_to_numpy(_image(wide, 'mono16', bigendian))
+    assert order == 'gray' and arr.dtype == np.uint8 and np.array_equal(arr, gray)
+
+
+@pytest.mark.parametrize('encoding', ['yuv422', 'yuv422_yuy2'])
+def test_yuv422_decodes_to_bgr(frame, encoding):
+    packed = _uyvy(frame, yuy2=encoding == 'yuv422_yuy2')
+    arr, order = image_to_numpy(_image(packed, encoding, pad=4))
+    assert order == 'bgr' and arr.shape == frame.shape
+    err = np.abs(arr.astype(int) - frame.astype(int))
+    assert np.median(err) <= 3 and err.mean() < 6           # chroma subsampling only
+    swapped = image_to_numpy(_image(packed, 'yuv422' if encoding != 'yuv422' else 'yuyv'))[0]
+    assert np.abs(swapped.astype(int) - frame.astype(int)).mean() > 20   # layout matters
+
+
+def test_unsupported_and_inconsistent_images_are_named():
+    msg = Image(height=2, width=3, encoding='bayer_rggb8', step=3, data=bytes(6))
+    with pytest.raises(ImageError, match="unsupported image encoding 'bayer_rggb8'.*yuv422"):
+        image_to_numpy(msg)
+    msg = Image(height=2, width=3, encoding='yuv422', step=6, data=bytes(12))
+    with pytest.raises(ImageError, match='even width'):
+        image_to_numpy(msg)
+    msg = Image(height=2, width=4, encoding='mono16', step=7, data=bytes(16))
+    with pytest.raises(ImageError, match='step 7 < width 4 x 2 bytes'):
+        image_to_numpy(msg)
+
+
+def test_raw_cdr_of_new_encodings(frame):
+    four = cv2.cvtColor(frame, cv2.COLOR_BGR2BGRA)
+    msg = _image(four, 'bgra8')
+    msg.header = Header(frame_id='cam0_optical_frame')
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 34
+    parsed, data = parse_image_cdr(serialize_message(msg))
+    assert parsed.encoding == 'bgra8' and parsed.header.stamp.nanosec == 34
+    assert np.array_equal(image_to_numpy(parsed, data)[0], frame)
+
+
+@pytest.mark.parametrize('fmt', ['jpeg', 'png'])
+def test_compressed_roundtrip_as_image_transport_writes_it(frame, fmt):
+    header = Header(frame_id='cam0_optical_frame')
+    header.stamp.sec, header.stamp.nanosec = 1000, 5
+    msg = numpy_to_compressed(frame, header, fmt)
+    assert msg.format == f'bgr8; {fmt} compressed bgr8'
+    parsed, data = parse_compressed_cdr(serialize_message(msg))
+    assert parsed.format == msg.format and parsed.header.stamp.sec == 1000
+    assert parsed.header.frame_id == 'cam0_optical_frame'
+    arr, order = compressed_to_numpy(parsed, data)
+    assert order == 'bgr' and arr.shape == frame.shape
+    err = np.abs(arr.astype(int) - frame.astype(int))
+    assert err.max() == 0 if fmt == 'png' else err.mean() < 4
+    gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+    arr, order = compressed_to_numpy(numpy_to_compressed(gray, header, fmt))
+    assert order == 'gray' and arr.shape == gray.shape
+
+
+def test_compressed_from_other_publishers_and_bad_bytes(frame):
+    ok, jpg = cv2.imencode('.jpg', frame)
+    # older publishers write just 'jpeg'; an 'rgb8' source is still compressed as bgr8
+    for fmt in ('jpeg', 'rgb8; jpeg compressed bgr8'):
+        arr, order = compressed_to_numpy(CompressedImage(format=fmt, data=jpg.tobytes()))
+        assert order == 'bgr' and arr.shape == frame.shape
+    with pytest.raises(ImageError, match='cannot decode CompressedImage'):
+        compressed_to_numpy(CompressedImage(format='jpeg', data=jpg.tobytes()[:200]))
+    with pytest.raises(ImageError, match='depth image'):
+        compressed_to_numpy(CompressedImage(format='16UC1; compressedDepth png', data=b'x'))
+    with pytest.raises(ImageError, match='empty CompressedImage'):
+        compressed_to_numpy(CompressedImage(format='jpeg'))
+    wire = serialize_message(CompressedImage(format='jpeg', data=jpg.tobytes()))
+    with pytest.raises(ImageError, match='declares'):
+        parse_compressed_cdr(wire[:-10])
+    with pytest.raises(ImageError, match='not a plain CDR'):
+        parse_compressed_cdr(b'\x00\x07' + wire[2:])
+
+
+def test_image_roundtrip_still_zero_copy(frame):
+    msg = numpy_to_image(frame)
+    parsed, data = parse_image_cdr(serialize_message(msg))
+    arr, _ = image_to_numpy(parsed, data)
+    assert np.array_equal(arr, frame) and not arr.flags['OWNDATA']
