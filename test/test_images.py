@@ -29,7 +29,7 @@ from std_msgs.msg import Header
 
 @pytest.fixture(scope='module')
 def frame(shared_data):
-    """A real 1920x1080 Panoptic frame, cropped to keep the tests quick."""
+    """Return a real 1920x1080 Panoptic frame, cropped to keep the tests quick."""
     img = cv2.imread(os.path.join(shared_data, 'panoptic_demo', '00_03', '00_03_00004500.jpg'))
     return np.ascontiguousarray(img[300:540, 800:1120])      # 320 x 240, people in it
 
