@@ -270,15 +270,108 @@ def test_fetch_is_idempotent_when_checksum_matches(tmp_path, yolo_case, capsys):
     open(dest, 'ab').write(b'x')                         # corrupted: no longer current
     assert not fetch_mod.is_current(dest)
     # The CLI finds it, lists it and reports its family.
-    assert cli_main(['model', 'path', '--cache-dir', str(cache)]) == 0
-    assert capsys.readouterr().out.strip() == dest
+    assert cli_main(['model', 'path', '--cache-dir', str(cache)]) == 1
+    assert 'sha256 mismatch' in capsys.readouterr().err
     assert cli_main(['model', 'list', '--json', '--cache-dir', str(cache)]) == 0
     listed = json.loads(capsys.readouterr().out)
-    assert listed['models'][0]['fetched'] == ['640x640']
+    assert listed['models'][0]['fetched'] == []          # corrupt: not listed as fetched
+    assert listed['models'][0]['corrupt'] == ['640x640']
     assert cli_main(['model', 'info', src]) == 0
     assert json.loads(capsys.readouterr().out)['family'] == 'yolo-pose'
     assert cli_main(['model', 'path', '--size', '384x640', '--cache-dir', str(cache)]) == 1
     assert 'mv3dpose model fetch' in capsys.readouterr().err
+
+
+def _fetched_copy(src, cache):
+    """Put ``src`` into ``cache`` as a fetched yolo11n-pose 640x640 with its sidecar."""
+    cache.mkdir(exist_ok=True)
+    dest = models.model_file('yolo11n-pose', (640, 640), str(cache))
+    data = open(src, 'rb').read()
+    open(dest, 'wb').write(data)
+    meta = {'name': 'yolo11n-pose', 'family': 'yolo-pose', 'input_size': [640, 640],
+            'onnx_sha256': hashlib.sha256(data).hexdigest()}
+    open(models.sidecar_file(dest), 'w').write(json.dumps(meta))
+    return dest
+
+
+def test_corrupt_model_is_refused_at_load_with_the_refetch_command(tmp_path, yolo_case):
+    """Issue 11 defect 10: the recorded sha256 is checked when the model loads."""
+    dest = _fetched_copy(yolo_case[0], tmp_path / 'cache')
+    assert open_estimator(dest).family == 'yolo-pose'     # intact: loads
+    data = bytearray(open(dest, 'rb').read())
+    data[len(data) // 2] ^= 0x01                          # one flipped bit in the weights
+    open(dest, 'wb').write(bytes(data))
+    os.utime(dest, ns=(1, 1))                             # a new mtime: hashed again
+    with pytest.raises(ModelError, match='sha256 mismatch') as err:
+        open_estimator(dest)
+    text = str(err.value)
+    assert dest in text and 'mv3dpose model fetch --model yolo11n-pose --size 640x640' in text
+    assert '--force' in text and f'--cache-dir {tmp_path / "cache"}' in text
+    # A plain ONNX without a sidecar (given by model.path) has nothing to check against.
+    assert open_estimator(yolo_case[0]).family == 'yolo-pose'
+
+
+def test_model_checksum_is_computed_once_per_file_and_mtime(tmp_path, yolo_case, monkeypatch):
+    dest = _fetched_copy(yolo_case[0], tmp_path / 'cache')
+    calls = []
+    real = models.sha256_file
+    monkeypatch.setattr(models, 'sha256_file', lambda p: calls.append(p) or real(p))
+    monkeypatch.setattr(models, '_DIGESTS', {})
+    for _ in range(3):
+        assert models.verify_model(dest) is not None
+    assert calls == [os.path.realpath(dest)]             # hashed once for three loads
+    os.utime(dest, ns=(10**18, 10**18))                  # touched: hashed again
+    assert models.verify_model(dest) is not None
+    assert len(calls) == 2
+
+
+def test_provider_auto_order_and_unknown_names():
+    from mv3dpose_ros.pose2d.estimator import resolve_providers
+    every = ['CPUExecutionProvider', 'OpenVINOExecutionProvider', 'CUDAExecutionProvider',
+             'TensorrtExecutionProvider']
+    assert resolve_providers('auto', every)[0] == [
+        'TensorrtExecutionProvider', 'CUDAExecutionProvider', 'OpenVINOExecutionProvider',
+        'CPUExecutionProvider']
+    assert resolve_providers('auto', ['CPUExecutionProvider', 'CUDAExecutionProvider']) == (
+        ['CUDAExecutionProvider', 'CPUExecutionProvider'], [])
+    assert resolve_providers('cpu, cuda', every)[0] == ['CUDAExecutionProvider',
+                                                        'CPUExecutionProvider']
+    chosen, warnings = resolve_providers(['tensorrt'], ['CPUExecutionProvider'])
+    assert chosen == ['CPUExecutionProvider'] and 'TensorrtExecutionProvider' in warnings[0]
+    with pytest.raises(ValueError, match="unknown execution provider 'cudaa'"):
+        resolve_providers('cudaa', every)
+
+
+def test_cuda_requested_on_a_cpu_only_machine_falls_back_to_cpu(yolo_case):
+    """A provider this onnxruntime cannot start: the model runs on the CPU, with a warning."""
+    import onnxruntime as ort
+    from mv3dpose_ros.pose2d import estimator as est_mod
+    if 'CUDAExecutionProvider' in ort.get_available_providers():
+        pytest.skip('this machine has CUDA')
+    path, people = yolo_case
+    est = open_estimator(path, providers='cuda')
+    assert est.provider == 'CPUExecutionProvider'
+    assert any('CUDAExecutionProvider' in w and 'falling back' in w for w in est.warnings)
+    assert len(est.infer(np.zeros((H, W, 3), np.uint8))) == 2       # and it runs
+    # Handed to onnxruntime anyway (as a misconfigured GPU build would be), the session
+    # still comes up on the CPU and says so.
+    session, used, warnings = est_mod._session(
+        path, ort.SessionOptions(), ['CUDAExecutionProvider', 'CPUExecutionProvider'])
+    assert used == 'CPUExecutionProvider' and session.get_providers() == [used]
+    assert 'CUDAExecutionProvider failed to initialise' in warnings[0]
+    with pytest.raises(ModelError, match='unknown execution provider'):
+        open_estimator(path, providers='gpu')
+
+
+def test_input_size_fits_the_image_aspect():
+    sizes = models.get_spec('yolo11n-pose').sizes
+    assert models.fit_size(sizes, (1080, 1920)) == (384, 640)      # 16:9: same scale as 640
+    assert models.fit_size(sizes, (1920, 1088)) == (640, 384)      # portrait
+    assert models.fit_size(sizes, (480, 480)) == (640, 640)        # square
+    assert models.fit_size(sizes, (1200, 1600)) == (640, 640)      # 4:3 loses detail at 384
+    assert models.fit_size([(640, 640)], (1080, 1920)) == (640, 640)
+    with pytest.raises(ValueError):
+        models.fit_size(sizes, (0, 1920))
 
 
 def test_keypoints_guessed_outside_the_image_get_zero_confidence(tmp_path):

@@ -76,15 +76,30 @@ def _fetch(args) -> int:
     return 0
 
 
+def _variant(meta: dict) -> str:
+    """Return 'HxW' or 'HxW int8' for a sidecar."""
+    tag = models.size_tag(meta.get('input_size', ()))
+    return f'{tag} int8' if meta.get('precision') == 'int8' else tag
+
+
+def _intact(path: str) -> bool:
+    """Tell whether a fetched ONNX still matches its recorded sha256."""
+    try:
+        return models.verify_model(path) is not None
+    except (models.ModelIntegrityError, OSError):
+        return False
+
+
 def _list(args) -> int:
-    fetched = models.list_fetched(args.cache_dir)
+    fetched = [(p, m, _intact(p)) for p, m in models.list_fetched(args.cache_dir)]
     rows = []
     for spec in models.MODELS.values():
-        have = [models.size_tag(m.get('input_size', ())) for p, m in fetched
-                if m.get('name') == spec.name]
+        mine = [(p, m, ok) for p, m, ok in fetched if m.get('name') == spec.name]
         rows.append({'name': spec.name, 'family': spec.family, 'licence': spec.licence,
                      'source': f'{spec.package}=={spec.version}',
-                     'sizes': [models.size_tag(s) for s in spec.sizes], 'fetched': have})
+                     'sizes': [models.size_tag(s) for s in spec.sizes],
+                     'fetched': [_variant(m) for p, m, ok in mine if ok],
+                     'corrupt': [_variant(m) for p, m, ok in mine if not ok]})
     if args.json:
         print(json.dumps({'cache_dir': models.cache_dir(args.cache_dir), 'models': rows},
                          indent=2))
@@ -92,15 +107,19 @@ def _list(args) -> int:
     print(f'cache: {models.cache_dir(args.cache_dir)}')
     for r in rows:
         default = ' (default)' if r['name'] == models.DEFAULT_MODEL else ''
+        bad = (f'; CORRUPT (sha256 mismatch, re-fetch with --force): {", ".join(r["corrupt"])}'
+               if r['corrupt'] else '')
         print(f'{r["name"]:<18} {r["family"]:<18} {r["licence"]:<11} from {r["source"]}'
               f'{default}\n{"":<18} sizes {", ".join(r["sizes"])}; fetched: '
-              f'{", ".join(r["fetched"]) or "none"}')
+              f'{", ".join(r["fetched"]) or "none"}{bad}')
     return 0
 
 
 def _path(args) -> int:
     try:
-        print(models.resolve_model_path(args.model, args.size, args.cache_dir))
+        path = models.resolve_model_path(args.model, args.size, args.cache_dir)
+        models.verify_model(path)
+        print(path)
     except (models.ModelNotFound, ValueError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1

@@ -29,10 +29,10 @@ supported. ``PoseEstimator.infer(image)`` returns ``Detections`` in original-ima
 from dataclasses import dataclass, field
 import os
 import time
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import cv2
-from mv3dpose_ros.pose2d.models import read_sidecar
+from mv3dpose_ros.pose2d.models import ModelIntegrityError, read_sidecar, verify_model
 from mv3dpose_ros.pose2d.ops import Letterbox, nms, xywh_to_xyxy
 import numpy as np
 
@@ -45,7 +45,64 @@ _SUPPORTED = ('supported: yolo-pose (Ultralytics pose export, input [1,3,H,W] fl
 
 
 class ModelError(ValueError):
-    """The ONNX file is missing, unreadable or not a supported 2D pose model."""
+    """The ONNX file is missing, unreadable, corrupt or not a supported 2D pose model."""
+
+
+#: onnxruntime execution providers that ``auto`` tries, fastest first; short names for params.
+PROVIDERS = {'tensorrt': 'TensorrtExecutionProvider', 'cuda': 'CUDAExecutionProvider',
+             'openvino': 'OpenVINOExecutionProvider', 'cpu': 'CPUExecutionProvider'}
+CPU = PROVIDERS['cpu']
+
+
+def available_providers() -> List[str]:
+    """Return the execution providers this onnxruntime build offers."""
+    import onnxruntime as ort
+    return list(ort.get_available_providers())
+
+
+def resolve_providers(request: Union[str, Sequence[str]] = 'auto',
+                      available: Optional[Sequence[str]] = None) -> Tuple[List[str], List[str]]:
+    """
+    Turn a provider request into the list onnxruntime gets, CPU always last.
+
+    ``request`` is 'auto' (TensorRT, CUDA, OpenVINO, CPU: those available, in that order), or
+    a comma-separated text / sequence of short names (tensorrt, cuda, openvino, cpu) or full
+    onnxruntime names. Returns ``(providers, warnings)``: a requested provider this build
+    does not offer is left out with a warning. Raises ``ValueError`` for an unknown name.
+    """
+    available = list(available_providers() if available is None else available)
+    items = ([p.strip() for p in request.split(',')] if isinstance(request, str)
+             else [str(p).strip() for p in request])
+    items = [p for p in items if p]
+    if not items or items == ['auto']:
+        return [p for p in PROVIDERS.values() if p in available and p != CPU] + [CPU], []
+    full = {v.lower(): v for v in PROVIDERS.values()}
+    chosen, warnings = [], []
+    for item in items:
+        name = PROVIDERS.get(item.lower()) or full.get(item.lower())
+        if name is None:
+            raise ValueError(f'unknown execution provider {item!r}: use auto or a comma-separated '
+                             f'list of {", ".join(PROVIDERS)} (or onnxruntime names)')
+        if name not in available:
+            warnings.append(f'execution provider {name} was requested but this onnxruntime '
+                            f'offers only {", ".join(available)}; falling back (for GPUs '
+                            'install onnxruntime-gpu: ONNXRUNTIME=gpu make setup)')
+        elif name not in chosen:
+            chosen.append(name)
+    if CPU in chosen:
+        chosen.remove(CPU)
+    return chosen + [CPU], warnings
+
+
+def _provider_options(name: str, model_path: str) -> Dict[str, str]:
+    """Return the options given to one provider (engine cache beside the model for TensorRT)."""
+    if name == PROVIDERS['tensorrt']:
+        cache = os.path.join(os.path.dirname(os.path.abspath(model_path)), 'trt-cache')
+        return {'trt_engine_cache_enable': 'True', 'trt_engine_cache_path': cache,
+                'trt_fp16_enable': 'True'}
+    if name == PROVIDERS['cuda']:
+        return {'cudnn_conv_algo_search': 'HEURISTIC'}
+    return {}
 
 
 @dataclass
@@ -100,6 +157,10 @@ class PoseEstimator:
     family: str = ''
     layout: str = LAYOUT
     last_timing: Timing = field(default_factory=Timing)
+    provider: str = CPU                     # the execution provider that runs the model
+    provider_options: Dict[str, str] = field(default_factory=dict)
+    warnings: List[str] = field(default_factory=list)   # e.g. a provider fell back to CPU
+    precision: str = 'fp32'                 # 'int8' for a quantised variant
 
     def __post_init__(self) -> None:
         self._input_name = self.session.get_inputs()[0].name
@@ -288,24 +349,67 @@ def detect_family(session, metadata: Dict[str, str]) -> Tuple[Optional[str], str
     return None, f'input {ins[0].type} {shape_in} matches no supported family'
 
 
+def _session(path: str, opts, providers: List[str]):
+    """
+    Create the session on ``providers``; return it, the provider used and warnings.
+
+    A provider that fails to initialise (missing CUDA libraries, no device, TensorRT build
+    error) does not stop the model: the session is created again on the CPU, with a warning.
+    """
+    import onnxruntime as ort
+    warnings = []
+    listed = [(p, _provider_options(p, path)) for p in providers]
+    try:
+        session = ort.InferenceSession(path, sess_options=opts, providers=listed)
+    except Exception as exc:  # noqa: B902 - onnxruntime raises several private exception types
+        if providers == [CPU]:
+            raise ModelError(f'{path}: onnxruntime cannot load it: {exc}') from None
+        warnings.append(f'execution providers {", ".join(providers[:-1])} failed to initialise '
+                        f'({str(exc).splitlines()[0] if str(exc) else type(exc).__name__}); '
+                        'falling back to CPUExecutionProvider')
+        try:
+            session = ort.InferenceSession(path, sess_options=opts, providers=[CPU])
+        except Exception as exc2:  # noqa: B902
+            raise ModelError(f'{path}: onnxruntime cannot load it: {exc2}') from None
+    used = session.get_providers()
+    chosen = used[0] if used else CPU
+    if chosen != providers[0]:
+        if not warnings:
+            warnings.append(f'execution provider {providers[0]} failed to initialise (onnxruntime '
+                            f'runs the model on {", ".join(used)}); falling back to {chosen}')
+    return session, chosen, warnings
+
+
 def open_estimator(path: str, family: str = 'auto', threads: int = 0,
                    input_size: Optional[Tuple[int, int]] = None,
                    score_threshold: Optional[float] = None, keypoint_threshold: float = 0.0,
                    nms_iou: float = 0.7, max_people: int = 100,
-                   spin: bool = False) -> PoseEstimator:
+                   spin: bool = False,
+                   providers: Union[str, Sequence[str]] = 'auto') -> PoseEstimator:
     """
-    Load an ONNX pose model on the CPU and return the adapter of its family.
+    Load an ONNX pose model and return the adapter of its family.
 
     ``threads`` is onnxruntime's intra-op thread count (0 = one per core). ``input_size``
     (height, width) is needed only for models with dynamic input dimensions; for a static
     model it must match. ``score_threshold`` None uses the family default (YOLO 0.25,
     MoveNet 0.2). ``spin`` lets worker threads busy-wait (lower latency, burns idle CPU).
-    Raises ``ModelError`` for a missing file or an unsupported model.
+    ``providers``: see ``resolve_providers`` ('auto' picks the fastest available); a provider
+    that is missing or fails to initialise falls back to the CPU, explained in ``warnings``.
+    A fetched model (one with a sidecar) is checked against its recorded sha256 first.
+    Raises ``ModelError`` for a missing, corrupt or unsupported model.
     """
     import onnxruntime as ort
     if not path or not os.path.isfile(path):
         raise ModelError(f'model file not found: {path!r} (fetch one with '
                          f'`mv3dpose model fetch`, or pass the path of a pose ONNX)')
+    try:
+        verify_model(path)
+    except (ModelIntegrityError, OSError) as exc:
+        raise ModelError(str(exc)) from None
+    try:
+        wanted, warnings = resolve_providers(providers)
+    except ValueError as exc:
+        raise ModelError(str(exc)) from None
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = max(0, int(threads))
     opts.inter_op_num_threads = 1
@@ -314,11 +418,8 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
     if not spin:
         opts.add_session_config_entry('session.intra_op.allow_spinning', '0')
     opts.log_severity_level = 3
-    try:
-        session = ort.InferenceSession(path, sess_options=opts,
-                                       providers=['CPUExecutionProvider'])
-    except Exception as exc:  # onnxruntime raises several private exception types
-        raise ModelError(f'{path}: onnxruntime cannot load it: {exc}') from None
+    session, chosen, more = _session(path, opts, wanted)
+    warnings += more
     metadata = dict(session.get_modelmeta().custom_metadata_map)
     sidecar = read_sidecar(path) or {}
     if sidecar.get('family') and 'family' not in metadata:
@@ -348,4 +449,7 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
     return _ADAPTERS[found](session=session, path=path, input_size=size, score_threshold=thr,
                             keypoint_threshold=float(keypoint_threshold),
                             nms_iou=float(nms_iou), max_people=int(max_people),
-                            metadata=metadata, licence=licence, family=found)
+                            metadata=metadata, licence=licence, family=found,
+                            provider=chosen,
+                            provider_options=dict(session.get_provider_options().get(chosen, {})),
+                            warnings=warnings, precision=sidecar.get('precision', 'fp32'))

