@@ -17,7 +17,7 @@
 import os
 
 import cv2
-from mv3dpose_ros.ros.images import (compressed_to_numpy, image_to_numpy, ImageError,
+from mv3dpose_ros.ros.images import (bgr_to_image, compressed_to_numpy, image_to_numpy, ImageError,
                                      numpy_to_compressed, numpy_to_image, parse_compressed_cdr,
                                      parse_image_cdr)
 import numpy as np
@@ -44,20 +44,6 @@ def _image(array, encoding, bigendian=0, pad=0):
                  data=data.tobytes())
 
 
-def _uyvy(bgr, yuy2=False):
-    """Pack BGR into UYVY (ROS yuv422) or YUYV (yuv422_yuy2), BT.601 video range like a camera."""
-    h, w = bgr.shape[:2]
-    i420 = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420)        # Y plane, then U and V at h/2, w/2
-    y = i420[:h]
-    chroma = i420[h:].reshape(2, h // 2, w // 2)
-    u, v = (np.repeat(c, 2, axis=0) for c in chroma)        # 4:2:0 -> 4:2:2 rows
-    out = np.empty((h, w, 2), np.uint8)
-    out[..., 0 if yuy2 else 1] = y
-    out[:, 0::2, 1 if yuy2 else 0] = u
-    out[:, 1::2, 1 if yuy2 else 0] = v
-    return out
-
-
 @pytest.mark.parametrize('encoding', ['bgra8', 'rgba8', '8UC4'])
 def test_four_channel_encodings_drop_alpha(frame, encoding):
     rgb = encoding == 'rgba8'
@@ -79,13 +65,27 @@ def test_mono16_scaled_by_its_bit_depth(frame, bits, bigendian):
 
 @pytest.mark.parametrize('encoding', ['yuv422', 'yuv422_yuy2'])
 def test_yuv422_decodes_to_bgr(frame, encoding):
-    packed = _uyvy(frame, yuy2=encoding == 'yuv422_yuy2')
+    packed = np.frombuffer(bgr_to_image(frame, encoding).data, np.uint8).reshape(
+        frame.shape[0], frame.shape[1], 2)
     arr, order = image_to_numpy(_image(packed, encoding, pad=4))
     assert order == 'bgr' and arr.shape == frame.shape
     err = np.abs(arr.astype(int) - frame.astype(int))
     assert np.median(err) <= 3 and err.mean() < 6           # chroma subsampling only
     swapped = image_to_numpy(_image(packed, 'yuv422' if encoding != 'yuv422' else 'yuyv'))[0]
     assert np.abs(swapped.astype(int) - frame.astype(int)).mean() > 20   # layout matters
+
+
+@pytest.mark.parametrize('encoding', ['bgr8', 'rgb8', 'mono8', 'bgra8', 'rgba8', 'mono16',
+                                      'yuv422', 'yuv422_yuy2'])
+def test_every_driver_encoding_roundtrips_through_dds_bytes(frame, encoding):
+    msg = bgr_to_image(frame, encoding)
+    assert msg.encoding == encoding and msg.width == frame.shape[1]
+    parsed, data = parse_image_cdr(serialize_message(msg))
+    arr, order = image_to_numpy(parsed, data)
+    ref = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if order == 'gray' else frame
+    arr = arr[..., ::-1] if order == 'rgb' else arr
+    assert arr.shape == ref.shape
+    assert np.abs(arr.astype(int) - ref.astype(int)).mean() < (6 if 'yuv' in encoding else 0.01)
 
 
 def test_unsupported_and_inconsistent_images_are_named():

@@ -13,22 +13,27 @@
 # limitations under the License.
 
 """
-image_publisher: replay a folder of images or a video file as ``sensor_msgs/Image``.
+mv3dpose_image_publisher: a folder of images or a video file as a free-running camera.
 
-For users without a camera driver. Frame ``k`` is stamped ``start_stamp + k / rate_hz``
-(integer nanoseconds), so several publishers started with the same ``--start-stamp`` and
-``--rate`` produce identical stamps frame for frame and the fusion node's synchroniser pairs
-them exactly, whenever each process started. With ``--calibration`` (any format
-``core.calibration.load_calibration`` reads) a matching ``CameraInfo`` is published on
-``camera_info`` with the same header as each image.
+For users without a camera driver. It publishes what a driver does: ``image_raw`` (and
+``camera_info`` with ``--calibration``, same header) under the camera's namespace, so
+``mv3dpose_image_publisher DIR --camera 00_03`` publishes ``/cam00_03/image_raw``, the default
+image topic of mv3dpose_bringup (camera names map to ROS names as in ``ros/names.py``; a
+``-r __ns:=/x`` remap wins). Each frame is stamped with the node clock when it is published,
+like a driver's capture stamp; with ``--start-stamp S`` frame ``k`` is stamped exactly
+``S + k / rate`` instead, so publishers given the same ``--start-stamp`` and ``--rate`` produce
+identical stamps frame for frame whenever each process started.
 
-    image_publisher ../shared/data/panoptic_demo/00_03 --rate 2 --start-stamp 1000 \
-        --calibration ../shared/data/panoptic_demo/camera_parameters.json --camera 00_03 \
-        --ros-args -r __ns:=/cam0
+``--encoding`` publishes any encoding camera drivers use (bgr8, rgb8, mono8, bgra8, rgba8,
+mono16, yuv422, yuv422_yuy2); ``--compressed jpeg|png`` publishes ``sensor_msgs/CompressedImage``
+on ``image_raw/compressed`` instead, as image_transport's compressed plugin does.
+
+    mv3dpose_image_publisher ../shared/data/panoptic_demo/00_03 --rate 5 --loop \
+        --calibration ../shared/data/panoptic_demo/camera_parameters.json --camera 00_03
 
 Every option is also a ROS parameter (``source``, ``rate_hz``, ``loop``, ``start_stamp``,
-``frame_id``, ``encoding``, ``calibration``, ``camera_name``, ``reliability``, ``max_frames``,
-``wait_for_subscribers``, ``preload``), so ``--params-file`` works too.
+``frame_id``, ``encoding``, ``compressed``, ``calibration``, ``camera_name``, ``reliability``,
+``max_frames``, ``wait_for_subscribers``, ``preload``), so ``--params-file`` works too.
 """
 
 import argparse
@@ -38,8 +43,9 @@ import threading
 from typing import Any, List, Optional
 
 import cv2
-from mv3dpose_ros.ros.images import camera_info_from_camera, numpy_to_image
+from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy_to_compressed
 from mv3dpose_ros.ros.messages import ns_to_stamp
+from mv3dpose_ros.ros.names import camera_namespace
 from mv3dpose_ros.ros.qos import describe, sensor_qos
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
@@ -47,18 +53,23 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header
 
+PUBLISH_ENCODINGS = ('bgr8', 'rgb8', 'mono8', 'bgra8', 'rgba8', 'mono16', 'yuv422',
+                     'yuv422_yuy2')
 IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp', '.tif', '.tiff', '.webp', '.ppm', '.pgm')
 
 PARAMETERS = {
     'source': ('', 'folder of images (sorted by name) or a video file'),
     'rate_hz': (10.0, 'publish rate; also the stamp spacing (1 / rate_hz)'),
     'loop': (False, 'start again after the last frame (stamps keep increasing)'),
-    'start_stamp': (0.0, 'stamp of frame 0 [s]; 0 = the node clock at the first frame'),
-    'frame_id': ('', 'header.frame_id; empty = <camera_name>_optical_frame'),
-    'encoding': ('bgr8', 'bgr8 | rgb8 | mono8'),
+    'start_stamp': (0.0, 'stamp of frame 0 [s], frame k at start + k / rate_hz; 0 = each frame '
+                         'stamped with the node clock when it is published (like a driver)'),
+    'frame_id': ('', 'header.frame_id; empty = <camera ROS name>_optical_frame'),
+    'encoding': ('bgr8', 'bgr8 | rgb8 | mono8 | bgra8 | rgba8 | mono16 | yuv422 | yuv422_yuy2'),
+    'compressed': ('', "'' = raw Image on image_raw; jpeg | png = CompressedImage on "
+                       'image_raw/compressed'),
     'calibration': ('', 'calibration file for CameraInfo (rig YAML, camera_info YAML, '
                         'Panoptic / VoxelPose JSON, Pose2Sim TOML); empty = none'),
     'camera_name': ('', 'camera in the calibration file; empty = the only one, else the '
@@ -138,8 +149,11 @@ class ImagePublisher(Node):
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         if float(p['rate_hz']) <= 0:
             raise ValueError(f'rate_hz must be > 0, got {p["rate_hz"]}')
-        if p['encoding'] not in ('bgr8', 'rgb8', 'mono8'):
-            raise ValueError(f'encoding must be bgr8, rgb8 or mono8, got {p["encoding"]!r}')
+        if p['encoding'] not in PUBLISH_ENCODINGS:
+            raise ValueError(f'encoding must be one of {", ".join(PUBLISH_ENCODINGS)}, got '
+                             f'{p["encoding"]!r}')
+        if p['compressed'] not in ('', 'jpeg', 'png'):
+            raise ValueError(f"compressed must be '', 'jpeg' or 'png', got {p['compressed']!r}")
         self.params = p
         self.source = FrameSource(p['source'], bool(p['preload']))
         ns_last = self.get_namespace().strip('/').split('/')[-1]
@@ -156,19 +170,26 @@ class ImagePublisher(Node):
             self.camera = cameras[name]
             self.camera_info = camera_info_from_camera(self.camera)
         self.camera_name = name or ns_last or 'camera'
-        self.frame_id = p['frame_id'] or f'{self.camera_name}_optical_frame'
+        self.frame_id = p['frame_id'] or f'{camera_namespace(self.camera_name)}_optical_frame'
+        # Under the camera's namespace unless the node was put in one (-r __ns:=...).
+        prefix = (f'/{camera_namespace(self.camera_name)}/'
+                  if self.get_namespace() == '/' and (name or p['camera_name']) else '')
         qos = sensor_qos(p['reliability'], 5)
-        self.image_pub = self.create_publisher(Image, 'image', qos)
-        self.info_pub = (self.create_publisher(CameraInfo, 'camera_info', qos)
+        image_topic = prefix + ('image_raw/compressed' if p['compressed'] else 'image_raw')
+        self.image_pub = self.create_publisher(
+            CompressedImage if p['compressed'] else Image, image_topic, qos)
+        self.info_pub = (self.create_publisher(CameraInfo, prefix + 'camera_info', qos)
                          if self.camera_info is not None else None)
         self.period_ns = int(round(1e9 / float(p['rate_hz'])))
         self.start_ns = int(round(float(p['start_stamp']) * 1e9)) or None
+        self.stamp_now = self.start_ns is None
         self.count = 0
         self.done = threading.Event()
         self.timer = self.create_timer(1.0 / float(p['rate_hz']), self._tick)
         self.get_logger().info(
-            f'{p["source"]} -> {self.resolve_topic_name("image")} [{describe(qos)}] at '
-            f'{p["rate_hz"]:g} Hz, frame_id {self.frame_id}'
+            f'{p["source"]} -> {self.image_pub.topic_name} [{describe(qos)}] '
+            f'{p["compressed"] or p["encoding"]} at {p["rate_hz"]:g} Hz, stamps '
+            f'{"node clock" if self.stamp_now else "start + k / rate"}, frame_id {self.frame_id}'
             + (f', CameraInfo of {self.camera_name}' if self.camera_info else ''))
 
     def stamp_ns(self, k: int) -> int:
@@ -190,8 +211,8 @@ class ImagePublisher(Node):
             self.get_logger().info(f'published {self.count} frames; end of {self.source.path}')
             self.done.set()
             return
-        if self.start_ns is None:
-            self.start_ns = self.get_clock().now().nanoseconds
+        if self.stamp_now:
+            self.start_ns = self.get_clock().now().nanoseconds - self.count * self.period_ns
         if self.camera_info is not None and (frame.shape[1], frame.shape[0]) != (
                 self.camera_info.width, self.camera_info.height):
             self.get_logger().warn(
@@ -199,12 +220,13 @@ class ImagePublisher(Node):
                 f'of {self.camera_name} is {self.camera_info.width}x{self.camera_info.height}',
                 throttle_duration_sec=10.0)
         header = Header(stamp=ns_to_stamp(self.stamp_ns(self.count)), frame_id=self.frame_id)
-        encoding = self.params['encoding']
-        if encoding == 'rgb8':
-            frame = cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
-        elif encoding == 'mono8':
-            frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        self.image_pub.publish(numpy_to_image(frame, header, encoding))
+        if self.params['compressed']:
+            gray = self.params['encoding'] in ('mono8', 'mono16')
+            self.image_pub.publish(numpy_to_compressed(
+                cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if gray else frame, header,
+                self.params['compressed']))
+        else:
+            self.image_pub.publish(bgr_to_image(frame, self.params['encoding'], header))
         if self.info_pub is not None:
             self.camera_info.header = header
             self.info_pub.publish(self.camera_info)
@@ -213,16 +235,21 @@ class ImagePublisher(Node):
 
 def _parse_cli(argv: List[str]) -> List[Parameter]:
     """Turn the convenience options into parameter overrides (--ros-args still work)."""
-    parser = argparse.ArgumentParser(prog='image_publisher', description=__doc__.splitlines()[1])
+    parser = argparse.ArgumentParser(prog='mv3dpose_image_publisher',
+                                     description=__doc__.splitlines()[1])
     parser.add_argument('source', nargs='?', help='image folder or video file')
     parser.add_argument('--rate', type=float, dest='rate_hz')
     parser.add_argument('--loop', action='store_true', default=None)
     parser.add_argument('--start-stamp', type=float, dest='start_stamp',
-                        help='stamp of the first frame [s]; give the same to every camera')
+                        help='stamp frame k start + k / rate [s] (default: the node clock at '
+                        'publication); give the same to every camera for identical stamps')
     parser.add_argument('--frame-id', dest='frame_id')
-    parser.add_argument('--encoding', choices=('bgr8', 'rgb8', 'mono8'))
+    parser.add_argument('--encoding', choices=PUBLISH_ENCODINGS)
+    parser.add_argument('--compressed', choices=('jpeg', 'png'),
+                        help='publish CompressedImage on image_raw/compressed')
     parser.add_argument('--calibration', help='calibration file for CameraInfo')
-    parser.add_argument('--camera', dest='camera_name', help='camera name in the calibration')
+    parser.add_argument('--camera', dest='camera_name', help='camera name (in the '
+                        'calibration); publishes under /<camera ROS name>/ (00_03 -> cam00_03)')
     parser.add_argument('--reliable', action='store_const', const='reliable',
                         dest='reliability')
     parser.add_argument('--count', type=int, dest='max_frames', help='stop after N frames')

@@ -47,7 +47,8 @@ from mv3dpose_ros.pose2d.models import ModelNotFound, parse_size, resolve_model_
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
-from mv3dpose_ros.ros.images import image_to_numpy, ImageError, numpy_to_image, parse_image_cdr
+from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
+from mv3dpose_ros.ros.images import numpy_to_image
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
@@ -55,8 +56,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 
 # name -> (default, description, dynamic)
 PARAMETERS = {
@@ -81,6 +81,9 @@ PARAMETERS = {
     'image_qos.reliability': ('best_effort', 'input QoS reliability: best_effort (REP-2003 '
                                              'sensor data) | reliable | system_default', False),
     'image_qos.depth': (5, 'input QoS history depth', False),
+    'image_transport': ('raw', 'raw: sensor_msgs/Image on image | compressed: '
+                               'sensor_msgs/CompressedImage (JPEG/PNG) on image/compressed, as '
+                               "image_transport's compressed plugin publishes it", False),
     'output_qos.depth': (10, 'persons_2d QoS history depth (RELIABLE)', False),
     'debug_image': (True, 'offer ~/debug_image (drawn only while subscribed)', False),
     'debug_min_confidence': (0.3, '[DYNAMIC] keypoints drawn in the debug image from this '
@@ -107,6 +110,7 @@ class Pose2DNode(LifecycleNode):
         self.error = ''
         self.camera_id = ''
         self._sub = None
+        self._compressed = False        # image_transport: compressed
         self._pub = self._info_pub = self._debug_pub = None
         self._diag: Optional[Diagnostics] = None
         self._worker: Optional[threading.Thread] = None
@@ -208,13 +212,21 @@ class Pose2DNode(LifecycleNode):
                                         daemon=True)
         self._worker.start()
         qos = sensor_qos(self._param('image_qos.reliability'), int(self._param('image_qos.depth')))
-        # raw=True: the pixels are read in place from the CDR bytes (parse_image_cdr).
-        self._sub = self.create_subscription(Image, 'image', self._on_image, qos,
-                                             event_callbacks=subscription_events(self, 'image',
+        transport = self._param('image_transport')
+        if transport not in ('raw', 'compressed'):
+            self.error = f"image_transport must be 'raw' or 'compressed', got {transport!r}"
+            self.get_logger().error(self.error)
+            return TransitionCallbackReturn.FAILURE
+        self._compressed = transport == 'compressed'
+        topic = self.resolve_topic_name('image') + '/compressed' if self._compressed else 'image'
+        # raw=True: the pixels are read in place from the CDR bytes (decode_image_bytes).
+        self._sub = self.create_subscription(CompressedImage if self._compressed else Image,
+                                             topic, self._on_image, qos,
+                                             event_callbacks=subscription_events(self, topic,
                                                                                  qos),
                                              raw=True)
         self.get_logger().info(
-            f'{self.resolve_topic_name("image")} [{describe(qos)}] -> '
+            f'{self.resolve_topic_name(topic)} [{describe(qos)}] -> '
             f'{self.resolve_topic_name("persons_2d")} [{describe(reliable_qos())}]')
         return TransitionCallbackReturn.SUCCESS
 
@@ -298,10 +310,7 @@ class Pose2DNode(LifecycleNode):
         t0 = time.perf_counter()
         data = None
         if isinstance(msg, (bytes, bytearray, memoryview)):
-            try:
-                msg, data = parse_image_cdr(msg)
-            except ImageError:          # not plain CDR: let rclpy decode it
-                msg = deserialize_message(bytes(msg), Image)
+            msg, data = decode_image_bytes(msg, self._compressed)
         now = self.get_clock().now().nanoseconds
         stamp = stamp_to_ns(msg.header.stamp)
         with self._stats_lock:
@@ -313,7 +322,7 @@ class Pose2DNode(LifecycleNode):
                      'with their capture time (fusion synchronises on it)', now)
             return None
         try:
-            image, order = image_to_numpy(msg, data)
+            image, order = message_to_numpy(msg, data)
         except ImageError as exc:
             self.rejected_encoding += 1
             self._rl('image', f'camera {self.camera_id}: image on '
@@ -321,8 +330,8 @@ class Pose2DNode(LifecycleNode):
             return None
         est = self.estimator
         det = est.infer(image, order)
-        out = numpy_to_person2d_array(det.keypoints, msg.header, self.camera_id, msg.width,
-                                      msg.height, self.layout.name, det.boxes, det.scores)
+        out = numpy_to_person2d_array(det.keypoints, msg.header, self.camera_id, image.shape[1],
+                                      image.shape[0], self.layout.name, det.boxes, det.scores)
         pub = self._pub
         if pub is None:
             return out

@@ -202,6 +202,34 @@ def compressed_to_numpy(msg: CompressedImage, data: Union[bytes, memoryview, Non
     return image, 'gray' if image.ndim == 2 else 'bgr'
 
 
+def decode_image_bytes(buf: Union[bytes, memoryview], compressed: bool = False
+                       ) -> Tuple[Union[Image, CompressedImage], Optional[memoryview]]:
+    """
+    Return ``(message, data)`` of a serialised ``Image`` (or ``CompressedImage``).
+
+    Plain CDR is read in place (``data`` is a view of the pixel / compressed bytes); anything
+    else goes through rclpy's deserialiser (``data`` None). What a ``raw=True`` image
+    subscription gets goes here, then to ``message_to_numpy``.
+    """
+    try:
+        return parse_compressed_cdr(buf) if compressed else parse_image_cdr(buf)
+    except ImageError:                  # not plain CDR: let rclpy decode it
+        from rclpy.serialization import deserialize_message
+        try:
+            return deserialize_message(bytes(buf), CompressedImage if compressed else Image), None
+        except Exception as exc:  # noqa: B902 - rclpy raises several error types
+            raise ImageError(f'undecodable {"CompressedImage" if compressed else "Image"} '
+                             f'bytes: {exc}') from None
+
+
+def message_to_numpy(msg: Union[Image, CompressedImage],
+                     data: Union[bytes, memoryview, None] = None) -> Tuple[np.ndarray, str]:
+    """Decode an ``Image`` or ``CompressedImage`` (``image_to_numpy``, ``compressed_to_numpy``)."""
+    if isinstance(msg, CompressedImage):
+        return compressed_to_numpy(msg, data)
+    return image_to_numpy(msg, data)
+
+
 def numpy_to_compressed(array: np.ndarray, header: Optional[Header] = None,
                         fmt: str = 'jpeg', quality: int = 90) -> CompressedImage:
     """
@@ -240,6 +268,47 @@ def numpy_to_image(array: np.ndarray, header: Optional[Header] = None,
                 width=int(array.shape[1]), encoding=encoding, is_bigendian=0,
                 step=int(array.shape[1] * channels))
     msg.data = array.tobytes()
+    return msg
+
+
+def bgr_to_image(bgr: np.ndarray, encoding: str = 'bgr8', header: Optional[Header] = None
+                 ) -> Image:
+    """
+    Build an ``Image`` of any encoding ``image_to_numpy`` reads from a uint8 BGR frame.
+
+    What a camera driver would publish: ``bgra8`` / ``rgba8`` (alpha 255), ``mono16`` (8 bits
+    shifted to 16), ``yuv422`` (UYVY) / ``yuv422_yuy2`` (YUYV), BT.601 video range as OpenCV
+    decodes it. Used by image_publisher and the tests.
+    """
+    bgr = np.ascontiguousarray(bgr)
+    if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3:
+        raise ImageError(f'expected a uint8 [H, W, 3] BGR frame, got {bgr.dtype} {bgr.shape}')
+    h, w = bgr.shape[:2]
+    if encoding in ('bgr8', '8UC3'):
+        return numpy_to_image(bgr, header, encoding)
+    if encoding == 'rgb8':
+        return numpy_to_image(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), header, 'rgb8')
+    if encoding in ('mono8', '8UC1'):
+        return numpy_to_image(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), header, encoding)
+    if encoding in ('bgra8', 'rgba8', '8UC4'):
+        out = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGBA if encoding == 'rgba8' else cv2.COLOR_BGR2BGRA)
+    elif encoding in ('mono16', '16UC1'):
+        out = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype('<u2') << 8
+    elif encoding in _YUV:
+        if w % 2 or h % 2:
+            raise ImageError(f'{encoding} needs an even size, got {w}x{h}')
+        i420 = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420)      # Y, then U and V at h/2 x w/2
+        u, v = (np.repeat(c, 2, axis=0) for c in i420[h:].reshape(2, h // 2, w // 2))
+        yuy2 = _YUV[encoding] == cv2.COLOR_YUV2BGR_YUY2
+        out = np.empty((h, w, 2), np.uint8)
+        out[..., 0 if yuy2 else 1] = i420[:h]
+        out[:, 0::2, 1 if yuy2 else 0] = u
+        out[:, 1::2, 1 if yuy2 else 0] = v
+    else:
+        raise _unsupported(encoding)
+    msg = Image(header=header or Header(), height=h, width=w, encoding=encoding,
+                is_bigendian=0, step=int(out.strides[0]))
+    msg.data = out.tobytes()
     return msg
 
 
