@@ -278,6 +278,12 @@ def test_good_minimal_rig(tmp_path):
     (lambda c: c['T_world_cam'].update(rotation=[0, 0, 1]), 'T_world_cam.rotation', '3 values'),
     (lambda c: c['T_world_cam'].update(translation=[0, float('nan'), 1]),
      'T_world_cam.translation', 'NaN'),
+    # issue 11 defect 5: huge values failed inside numpy with an error naming no field
+    (lambda c: c.update(distortion=[1e300, 0, 0, 0, 0]), 'dist', 'plausible range'),
+    (lambda c: c.update(distortion=[10 ** 19, 0, 0, 0, 0]), 'dist', 'plausible range'),
+    (lambda c: c.update(K=[1e12, 500, 320, 240]), 'K', 'plausible range'),
+    (lambda c: c.update(image_width=10 ** 9), 'width', 'positive integer'),
+    (lambda c: c['T_world_cam'].update(translation=[0, 1e300, 1]), 't', 'plausible range'),
 ])
 def test_bad_rig_entries(tmp_path, edit, field, match):
     doc = rig_doc()
@@ -394,3 +400,33 @@ def test_bad_pose2sim(tmp_path, shared_data):
     expect_error(write(tmp_path, 'c.toml', bad), 'cam_01', 'K', 'principal point')
     with pytest.raises(CalibrationError, match='no camera'):
         load_calibration(write(tmp_path, 'c.toml', '[metadata]\nerror = 0.0\n'))
+
+
+def test_hostile_files_fail_fast_naming_the_file(tmp_path):
+    """Issue 11 defect 5: alias bomb, deep nesting and 400-digit numbers in every format."""
+    import resource
+    import time
+    bomb = 'cameras: &a0 [x, x, x, x, x, x, x, x, x]\n' + ''.join(
+        f'k{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 9) + ']\n' for i in range(1, 10))
+    deep = '[' * 3000 + ']' * 3000
+    cases = {
+        'bomb.yaml': (bomb, 'alias bomb'),
+        'deep.yaml': ('cameras: ' + deep, 'nesting'),
+        'deep.json': ('{"0": {"R": ' + deep + '}}', 'nesting'),
+        'deep.toml': ('[cam]\nsize = ' + deep, 'nesting'),
+        'digits.json': ('{"0": {"R": [' + '9' * 400 + '], "T": [0, 0, 0], "fx": 1}}',
+                        '400 digits'),
+        'digits.toml': ('[cam]\nsize = [' + '9' * 400 + ', 1]', 'digits'),
+        'digits.yaml': ('cameras:\n  a:\n    image_width: ' + '9' * 400, '400 digits'),
+        'inf.json': ('{"0": {"R": [1e400], "T": [0, 0, 0], "fx": 1}}', 'out of range'),
+    }
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    for name, (text, match) in cases.items():
+        path = write(tmp_path, name, text)
+        t0 = time.process_time()
+        with pytest.raises(CalibrationError) as info:
+            load_calibration(path)
+        assert path in str(info.value) and match in str(info.value), str(info.value)
+        assert time.process_time() - t0 < 5.0, name   # generous: it takes milliseconds
+    # the bomb expands to 4e9 nodes; refusing it must not allocate them (was 2.9 GB)
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0 < 200_000   # kB

@@ -69,6 +69,12 @@ def test_read_file_shapes_and_missing_joints(tmp_path):
     ('{"people": [{"pose_keypoints_2d": [1, 2, 1]}]}', 'the layout has 3'),
     ('{"people": [{"pose_keypoints_2d": [1, "a", 1, 1, 1, 1, 1, 1, 1]}]}', 'non-numeric'),
     (b'\xff\xfe\x00', 'not UTF-8'),
+    # issue 11 defect 5: these raised OverflowError / RecursionError (a traceback)
+    ('{"people": [{"pose_keypoints_2d": [' + '9' * 400 + ', 1, 1, 1, 1, 1, 1, 1, 1]}]}',
+     'integer with 400 digits'),
+    ('{"people": [{"pose_keypoints_2d": ' + '[' * 3000 + ']' * 3000 + '}]}', 'nesting'),
+    ('{"people": [{"pose_keypoints_2d": [1e400, 1, 1, 1, 1, 1, 1, 1, 1]}]}', 'out of range'),
+    ('{"people": [{"pose_keypoints_2d": [1e300, 1, 1, 1, 1, 1, 1, 1, 1]}]}', 'beyond'),
 ])
 def test_malformed_files_name_file_and_reason(tmp_path, content, reason):
     p = tmp_path / 'c_0003.json'

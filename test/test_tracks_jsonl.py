@@ -81,7 +81,34 @@ def test_stream_target_and_units():
     ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [[1, 2]]}]}',
      'not [x, y, z]'),
     ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
-     '"confidence": [1, 1]}]}', '2 confidences'),
+     '"confidence": [1, 1]}]}', 'confidence has 2 values'),
+    # defect 5 of issue 11: each of these raised a bare Python exception (a traceback in
+    # every command reading tracks) or was read as garbage
+    ('{"frame": 1e400, "tracks": []}', '1e400 is out of range'),
+    ('{"frame": 1, "stamp": "abc", "tracks": []}', 'stamp .abc. is not a number'),
+    ('{"frame": ' + '9' * 400 + ', "tracks": []}', 'integer with 400 digits'),
+    ('{"frame": 1, "tracks": ' + '[' * 5000 + ']' * 5000 + '}', 'nesting 5001 levels'),
+    ('{"frame": 2.5, "tracks": []}', 'frame 2.5 is not an integer'),
+    ('{"frame": 1, "tracks": [{"id": "x", "state": "confirmed", "joints": []}]}',
+     'track id .x. is not an integer'),
+    ('{"frame": 1, "tracks": [{"id": -1, "state": "confirmed", "joints": []}]}',
+     'track id -1 is out of range'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": ["c"], "joints": []}]}', 'unknown state'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [[1, "a", 2]]}]}',
+     'joint 0 .a. is not a number'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [[1, 2, NaN]]}]}',
+     'NaN is not a JSON number'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [[1, 2, 1e300]]}]}',
+     'out of range'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
+     '"joint_state": [7]}]}', 'joint_state 7 is out of range'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
+     '"position": [1, 2]}]}', 'position has 2 values'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
+     '"num_views": ["x"]}]}', 'num_views .x. is not an integer'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
+     '"score": {}}]}', 'score {} is not a number'),
+    ('{"frame": 1, "layout": 5, "tracks": []}', 'layout 5 is not a string'),
 ])
 def test_bad_lines_are_reported_and_skipped(tmp_path, line, reason):
     with pytest.raises(TracksFormatError, match=reason.replace('[', r'\[')):
@@ -92,3 +119,11 @@ def test_bad_lines_are_reported_and_skipped(tmp_path, line, reason):
     frames = list(read_tracks(str(path), issues))
     assert [f.frame for f in frames] == [0, 2]
     assert len(issues) == 1 and issues[0].startswith(f'{path}:2: ')
+
+
+def test_line_that_is_not_utf8_is_reported_and_skipped(tmp_path):
+    path = tmp_path / 'bad.jsonl'
+    path.write_bytes(b'{"frame": 0, "tracks": []}\n{"frame": \xff}\n{"frame": 2, "tracks": []}\n')
+    issues = []
+    assert [f.frame for f in read_tracks(str(path), issues)] == [0, 2]
+    assert issues == [f'{path}:2: not UTF-8 text (byte 10)']

@@ -54,17 +54,20 @@ Rig YAML schema (``save_rig_yaml`` writes it, ``load_calibration`` reads it)::
                                       # rig file; gives K, distortion and image size, and
                                       # fields written inline override it
 
-Every error is a ``CalibrationError`` naming the file, the camera and the field.
+Every error is a ``CalibrationError`` naming the file, the camera and the field. Files are
+parsed by ``core.files`` (size, nesting, number and YAML alias limits) and every value is
+range-checked by ``Camera``.
 """
 
-import json
+import difflib
 import os
 import re
-import tomllib
-from typing import Any, Dict, Iterable, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
 from mv3dpose_ros.core.camera import CalibrationError, Camera
+from mv3dpose_ros.core.files import atomic_path, load_json, load_toml, load_yaml, LoadError
+from mv3dpose_ros.core.files import read_text
 import numpy as np
 import yaml
 
@@ -117,25 +120,22 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:  # noqa: N803
 
 
 # ---------------------------------------------------------------------------- helpers
-def _read_text(path: str) -> str:
-    try:
-        with open(path, 'r', encoding='utf-8') as f:
-            return f.read()
-    except (OSError, UnicodeDecodeError) as e:
-        raise CalibrationError(f'cannot read calibration file: {e}', source=path) from None
+#: Largest calibration file read [bytes] (a 500-camera rig is well below 1 MB).
+MAX_CALIBRATION_BYTES = 16 * 1024 * 1024
 
 
 def _parse(path: str, kind: str) -> Any:
-    text = _read_text(path)
     try:
-        if kind == 'json':
-            return json.loads(text)
-        if kind == 'toml':
-            return tomllib.loads(text)
-        return yaml.safe_load(text)
-    except (ValueError, yaml.YAMLError) as e:
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise CalibrationError(f'not valid {kind.upper()}: {msg}', source=path) from None
+        text = read_text(path, MAX_CALIBRATION_BYTES)
+    except OSError as e:
+        raise CalibrationError(f'cannot read calibration file: {e.strerror or e}',
+                               source=path) from None
+    except LoadError as e:
+        raise CalibrationError(f'cannot read calibration file: {e}', source=path) from None
+    try:
+        return {'json': load_json, 'toml': load_toml}.get(kind, load_yaml)(text)
+    except LoadError as e:
+        raise CalibrationError(f'not valid {kind.upper()}: {e}', source=path) from None
 
 
 def _field(entry: Any, key: str, camera: Optional[str], source: str) -> Any:
@@ -151,9 +151,9 @@ def _numbers(value: Any, count: Optional[int], key: str, camera: Optional[str],
              source: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise CalibrationError(f'not numeric: {value!r}', source=source, camera=camera,
-                               field=key) from None
+    except (TypeError, ValueError, OverflowError):
+        raise CalibrationError(f'not numeric: {repr(value)[:80]}', source=source,
+                               camera=camera, field=key) from None
     if count is not None and arr.size != count:
         raise CalibrationError(f'has {arr.size} values, expected {count}', source=source,
                                camera=camera, field=key)
@@ -321,10 +321,9 @@ def save_rig_yaml(cameras: Mapping[str, Camera], path: str, world_frame: str = '
         header = ''.join(f'# {line}\n' for line in comment.splitlines())
     text = yaml.safe_dump(rig_yaml_dict(cameras, world_frame), sort_keys=False,
                           default_flow_style=None, width=100)
-    tmp = f'{path}.tmp'
-    with open(tmp, 'w', encoding='utf-8') as f:
-        f.write(header + text)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        with open(tmp, 'w', encoding='utf-8') as f:
+            f.write(header + text)
 
 
 # ---------------------------------------------------------------------------- Panoptic
@@ -465,3 +464,51 @@ def load_calibration(path: str, fmt: str = 'auto', cameras: Optional[Iterable[st
     else:
         result = _load_camera_info(path, _parse(path, 'yaml'))
     return _select(result, cameras, path)
+
+
+#: Keys of the rig YAML schema (module docstring), per level.
+RIG_KEYS = ('format', 'version', 'world_frame', 'cameras')
+RIG_CAMERA_KEYS = ('name', 'image_width', 'image_height', 'K', 'distortion_model', 'distortion',
+                   'T_world_cam', 'intrinsics_file')
+RIG_POSE_KEYS = ('translation', 'rotation')
+
+
+def rig_metadata(path: str) -> Tuple[Optional[str], List[str]]:
+    """
+    Return a rig YAML's ``world_frame`` (None if absent or not a rig file) and its unknown keys.
+
+    Each unknown key comes as a sentence naming it, where it is and the closest valid key, so
+    a typo ('world_fame', 'T_world_camera') is reported instead of silently ignored.
+    """
+    path = os.fspath(path)
+    try:
+        if detect_format(path) != 'rig':
+            return None, []
+    except CalibrationError:
+        return None, []
+    data = _parse(path, 'yaml')
+    if not isinstance(data, Mapping):
+        return None, []
+    problems: List[str] = []
+
+    def check(entry: Any, valid: Sequence[str], where: str) -> None:
+        if not isinstance(entry, Mapping):
+            return
+        for key in entry:
+            if str(key) not in valid:
+                close = difflib.get_close_matches(str(key), valid, n=1)
+                hint = f'; did you mean {close[0]!r}?' if close else \
+                    f' (valid: {", ".join(valid)})'
+                problems.append(f'{path}: unknown key {key!r} in {where}{hint}')
+
+    check(data, RIG_KEYS, 'the rig')
+    cams = data.get('cameras')
+    entries = cams.items() if isinstance(cams, Mapping) else \
+        ((c.get('name', i) if isinstance(c, Mapping) else i, c)
+         for i, c in enumerate(cams if isinstance(cams, list) else []))
+    for name, entry in entries:
+        check(entry, RIG_CAMERA_KEYS, f'camera {name!r}')
+        if isinstance(entry, Mapping):
+            check(entry.get('T_world_cam'), RIG_POSE_KEYS, f'camera {name!r} T_world_cam')
+    frame = data.get('world_frame')
+    return (str(frame) if frame else None), problems

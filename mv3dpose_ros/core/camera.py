@@ -33,6 +33,12 @@ import numpy as np
 
 #: Tolerance on ``R @ R.T - I`` (max abs) and on ``det(R) - 1`` when validating rotations.
 ROTATION_TOLERANCE = 1e-4
+#: Largest plausible magnitudes: image side [px], K entries [px], distortion coefficients,
+#: translation [m]. Beyond them a file is corrupt, and the numerics would overflow.
+MAX_IMAGE_SIZE = 100_000
+MAX_K = 1e7
+MAX_DISTORTION = 1e4
+MAX_TRANSLATION = 1e6
 
 
 class CalibrationError(ValueError):
@@ -58,8 +64,8 @@ class CalibrationError(ValueError):
 def _array(value, shape, name, camera) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise CalibrationError(f'not a numeric array: {value!r}', camera=camera,
+    except (TypeError, ValueError, OverflowError):
+        raise CalibrationError(f'not a numeric array: {repr(value)[:80]}', camera=camera,
                                field=name) from None
     if arr.size != int(np.prod(shape)):
         raise CalibrationError(f'has {arr.size} values, expected {int(np.prod(shape))} '
@@ -70,14 +76,23 @@ def _array(value, shape, name, camera) -> np.ndarray:
     return arr
 
 
+def _bounded(arr: np.ndarray, limit: float, name: str, camera) -> np.ndarray:
+    big = float(np.abs(arr).max()) if arr.size else 0.0
+    if big > limit:
+        raise CalibrationError(f'value {big:.6g} beyond the plausible range +-{limit:g}',
+                               camera=camera, field=name)
+    return arr
+
+
 def _image_size(value, name, camera) -> int:
     try:
         size = float(value)
-    except (TypeError, ValueError):
-        raise CalibrationError(f'not a number: {value!r}', camera=camera, field=name) from None
-    if not np.isfinite(size) or size <= 0 or size != int(size):
-        raise CalibrationError(f'must be a positive integer, got {value!r}', camera=camera,
-                               field=name)
+    except (TypeError, ValueError, OverflowError):
+        raise CalibrationError(f'not a number: {repr(value)[:80]}', camera=camera,
+                               field=name) from None
+    if not np.isfinite(size) or size <= 0 or size != int(size) or size > MAX_IMAGE_SIZE:
+        raise CalibrationError(f'must be a positive integer <= {MAX_IMAGE_SIZE}, got {value!r}',
+                               camera=camera, field=name)
     return int(size)
 
 
@@ -117,7 +132,7 @@ class Camera:
         name = self.name
         self.width = _image_size(self.width, 'width', name)
         self.height = _image_size(self.height, 'height', name)
-        K = _array(self.K, (3, 3), 'K', name)
+        K = _bounded(_array(self.K, (3, 3), 'K', name), MAX_K, 'K', name)
         if not K.any():
             raise CalibrationError('all zeros (uncalibrated camera?)', camera=name, field='K')
         if not np.allclose(K[2], [0, 0, 1], atol=1e-9) or abs(K[1, 0]) > 1e-9:
@@ -136,7 +151,7 @@ class Camera:
             dist = np.concatenate([dist, np.zeros(5 - dist.size)])
         elif dist.size > 5 and np.all(dist[5:] == 0):
             dist = dist[:5]
-        dist = _array(dist, (5,), 'dist', name)
+        dist = _bounded(_array(dist, (5,), 'dist', name), MAX_DISTORTION, 'dist', name)
         R = _array(self.R, (3, 3), 'R', name)
         err = np.abs(R @ R.T - np.eye(3)).max()
         det = np.linalg.det(R)
@@ -145,7 +160,7 @@ class Camera:
                                    f'det = {det:.6g})', camera=name, field='R')
         u, _, vt = np.linalg.svd(R)   # remove rounding so E and F are exactly consistent
         R = u @ vt
-        t = _array(self.t, (3,), 't', name)
+        t = _bounded(_array(self.t, (3,), 't', name), MAX_TRANSLATION, 't', name)
         self.K, self.dist, self.R, self.t = map(_readonly, (K, dist, R, t))
         self._K_inv = _readonly(np.linalg.inv(K))
         self._r2_max = _max_radius2(dist)

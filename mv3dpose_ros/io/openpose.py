@@ -24,22 +24,27 @@ stem, e.g. ``cam01.0042.json`` and ``video_000000000042_keypoints.json`` are bot
 
 Per camera and frame, a missing file means the camera saw no one (an empty ``[0, J, 3]``
 array); a malformed file is reported (file name and reason) and skipped, the camera then
-counts as absent for that frame. Nothing here raises on bad file contents.
+counts as absent for that frame. Nothing here raises on bad file contents. Files are parsed
+by ``core.files.load_json`` (size, nesting and number limits; ``NaN``/``Infinity`` are
+accepted and make the joint missing, a literal that overflows a double is an error).
 """
 
 from dataclasses import dataclass
-import json
 import logging
-import math
 import os
 import re
 from typing import Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
+from mv3dpose_ros.core.files import load_json, LoadError, read_text
 import numpy as np
 
 logger = logging.getLogger(__name__)
 
 _KEYS = ('pose_keypoints_2d', 'pose_keypoints')   # the second one: OpenPose < 1.2
+#: Largest OpenPose file read [bytes] (100 people x 135 keypoints is ~0.5 MB).
+MAX_FILE_BYTES = 16 * 1024 * 1024
+#: Largest plausible |x| or |y| [px]; beyond it a file is corrupt.
+MAX_COORDINATE = 1e6
 _DIGITS = re.compile(r'(\d+)')
 
 
@@ -110,7 +115,13 @@ def parse_openpose(data: object, num_joints: Optional[int] = None) -> np.ndarray
         raise OpenPoseFormatError(f'people have different joint counts: '
                                   f'{sorted(n // 3 for n in lengths)}')
     arr = np.asarray(poses, dtype=float).reshape(len(poses), -1, 3)
-    bad = ~np.isfinite(arr).all(-1) | (arr[..., 2] <= 0)
+    finite = np.isfinite(arr).all(-1)
+    far = finite & (np.abs(arr[..., :2]) > MAX_COORDINATE).any(-1)
+    if far.any():
+        k, j = np.argwhere(far)[0]
+        raise OpenPoseFormatError(f'people[{k}] keypoint {j} at ({arr[k, j, 0]:.3g}, '
+                                  f'{arr[k, j, 1]:.3g}) px, beyond +-{MAX_COORDINATE:g}')
+    bad = ~finite | (arr[..., 2] <= 0)
     arr[bad] = 0.0
     return arr
 
@@ -118,17 +129,11 @@ def parse_openpose(data: object, num_joints: Optional[int] = None) -> np.ndarray
 def _read(path: str, num_joints: Optional[int]) -> np.ndarray:
     """Read one file; OpenPoseFormatError carries the reason only."""
     try:
-        with open(path, 'rb') as f:
-            raw = f.read()
-        data = json.loads(raw.decode('utf-8'),
-                          parse_constant=lambda c: math.nan)   # NaN/Infinity -> missing
+        data = load_json(read_text(path, MAX_FILE_BYTES), allow_nan=True)  # NaN -> missing
     except OSError as e:
         raise OpenPoseFormatError(f'cannot read ({e.strerror or e})') from None
-    except UnicodeDecodeError:
-        raise OpenPoseFormatError('not UTF-8 text') from None
-    except json.JSONDecodeError as e:
-        raise OpenPoseFormatError(f'invalid JSON ({e.msg} at line {e.lineno} '
-                                  f'column {e.colno})') from None
+    except LoadError as e:
+        raise OpenPoseFormatError(str(e)) from None
     return parse_openpose(data, num_joints)
 
 

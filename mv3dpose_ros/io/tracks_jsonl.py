@@ -29,15 +29,18 @@ Schema (units are always metres on write)::
 ``state`` is one of ``tentative``, ``confirmed``, ``coasting``, ``deleted`` (a deleted track
 appears once, as a tombstone). Only ``frame``, ``tracks`` and per track ``id``, ``state``,
 ``joints`` are required on read; readers ignore unknown keys. Coordinates are rounded to
-micrometres, confidences to 1e-4.
+micrometres, confidences to 1e-4. Reading is strict (``core.files.load_json`` limits, every
+known field type- and range-checked): a bad line raises ``TracksFormatError`` naming the field,
+and ``read_tracks`` reports it as ``path:line: reason`` and skips it.
 """
 
 from dataclasses import dataclass, field
 import json
 import logging
 import math
-from typing import IO, Iterable, Iterator, List, Optional, Sequence, Union
+from typing import IO, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
 
+from mv3dpose_ros.core.files import load_json, LoadError
 from mv3dpose_ros.core.types import Track, TrackState
 import numpy as np
 
@@ -160,75 +163,141 @@ class TracksFormatError(ValueError):
     """A line of a tracks file that does not follow the schema."""
 
 
+#: Largest plausible coordinate magnitude [m] and joint count; beyond them a line is corrupt.
+MAX_COORDINATE_M = 1e6
+MAX_JOINTS = 1000
+_MAX_ID = 2 ** 64          # ids are uint64 in TrackedSkeleton
+_MAX_FRAME = 2 ** 63
+
+
+def _integer(value: object, what: str, lo: int, hi: int) -> int:
+    """Return ``value`` as an int in ``[lo, hi)``; integral floats (``12.0``) are accepted."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TracksFormatError(f'{what} {repr(value)[:40]} is not an integer')
+    if not lo <= value < hi:
+        raise TracksFormatError(f'{what} {value} is out of range [{lo}, {hi})')
+    return value
+
+
+def _number(value: object, what: str, limit: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise TracksFormatError(f'{what} {repr(value)[:40]} is not a number')
+    v = float(value)
+    if not abs(v) <= limit:
+        raise TracksFormatError(f'{what} {v:.6g} is out of range (|value| <= {limit:g})')
+    return v
+
+
+def _numbers(value: object, what: str, count: Optional[int], limit: float,
+             nullable: bool = False) -> Optional[np.ndarray]:
+    """Return a list of ``count`` numbers as float64 (None for null when ``nullable``)."""
+    if value is None and nullable:
+        return None
+    if not isinstance(value, list):
+        raise TracksFormatError(f'{what} is {type(value).__name__}, expected a list')
+    if count is not None and len(value) != count:
+        raise TracksFormatError(f'{what} has {len(value)} values, expected {count}')
+    return np.array([_number(v, what, limit) for v in value], dtype=float)
+
+
 def _parse_track(obj: object, scale: float) -> TrackRecord:
     if not isinstance(obj, dict):
         raise TracksFormatError(f'track is {type(obj).__name__}, expected an object')
     for key in ('id', 'state', 'joints'):
         if key not in obj:
             raise TracksFormatError(f'track without "{key}"')
-    state = _STATES.get(str(obj['state']).lower())
+    tid = _integer(obj['id'], 'track id', 0, _MAX_ID)
+    state = _STATES.get(obj['state'].lower()) if isinstance(obj['state'], str) else None
     if state is None:
-        raise TracksFormatError(f'track {obj["id"]}: unknown state {obj["state"]!r} '
+        raise TracksFormatError(f'track {tid}: unknown state {repr(obj["state"])[:40]} '
                                 f'(known: {", ".join(_STATES)})')
     joints_in = obj['joints']
     if not isinstance(joints_in, list):
-        raise TracksFormatError(f'track {obj["id"]}: "joints" is not a list')
-    joints = np.full((len(joints_in), 3), np.nan)
+        raise TracksFormatError(f'track {tid}: "joints" is not a list')
+    if len(joints_in) > MAX_JOINTS:
+        raise TracksFormatError(f'track {tid}: {len(joints_in)} joints (at most {MAX_JOINTS})')
+    n = len(joints_in)
+    joints = np.full((n, 3), np.nan)
     for j, p in enumerate(joints_in):
         if p is None:
             continue
         if not (isinstance(p, list) and len(p) == 3):
-            raise TracksFormatError(f'track {obj["id"]}: joint {j} is not [x, y, z] or null')
-        try:
-            joints[j] = np.asarray(p, dtype=float) * scale
-        except (TypeError, ValueError):
-            raise TracksFormatError(f'track {obj["id"]}: joint {j} is not numeric') from None
+            raise TracksFormatError(f'track {tid}: joint {j} is not [x, y, z] or null')
+        joints[j] = _numbers(p, f'track {tid}: joint {j}', 3, MAX_COORDINATE_M / scale) * scale
     conf = obj.get('confidence')
     if conf is None:
         conf = np.where(np.isfinite(joints).all(-1), 1.0, 0.0)
     else:
-        try:
-            conf = np.asarray(conf, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise TracksFormatError(f'track {obj["id"]}: confidence is not numeric') from None
-        if conf.shape[0] != len(joints):
-            raise TracksFormatError(f'track {obj["id"]}: {conf.shape[0]} confidences for '
-                                    f'{len(joints)} joints')
+        conf = _numbers(conf, f'track {tid}: confidence', n, 1e6)
     js = obj.get('joint_state')
+    if js is not None:
+        if not isinstance(js, list) or len(js) != n:
+            raise TracksFormatError(f'track {tid}: "joint_state" is not a list of {n} values')
+        js = np.array([_integer(v, f'track {tid}: joint_state', 0, 3) for v in js], np.uint8)
     rest = {k: v for k, v in obj.items()
             if k not in ('id', 'state', 'joints', 'confidence', 'joint_state')}
-    try:
-        tid = int(obj['id'])
-    except (TypeError, ValueError):
-        raise TracksFormatError(f'track id {obj["id"]!r} is not an integer') from None
-    return TrackRecord(id=tid, state=state, joints=joints, confidence=conf,
-                       joint_state=None if js is None else np.asarray(js, dtype=np.uint8),
+    for key in ('position', 'velocity'):
+        if key in rest:
+            v = _numbers(rest[key], f'track {tid}: {key}', 3, MAX_COORDINATE_M, nullable=True)
+            rest[key] = None if v is None else (v * scale).tolist()
+    if rest.get('num_views') is not None:
+        views = rest['num_views']
+        if not isinstance(views, list) or len(views) != n:
+            raise TracksFormatError(f'track {tid}: "num_views" is not a list of {n} values')
+        rest['num_views'] = [_integer(v, f'track {tid}: num_views', 0, 256) for v in views]
+    if rest.get('score') is not None:
+        rest['score'] = _number(rest['score'], f'track {tid}: score', 1e6)
+    return TrackRecord(id=tid, state=state, joints=joints, confidence=conf, joint_state=js,
                        extra=rest)
 
 
 def parse_line(line: str) -> TracksFrame:
-    """Parse one JSON line; raises :class:`TracksFormatError` naming the problem."""
+    """Parse one JSON line; raises :class:`TracksFormatError` naming the problem and field."""
     try:
-        obj = json.loads(line)
-    except json.JSONDecodeError as e:
-        raise TracksFormatError(f'invalid JSON ({e.msg} at column {e.colno})') from None
+        obj = load_json(line)
+    except LoadError as e:
+        raise TracksFormatError(str(e)) from None
     if not isinstance(obj, dict):
         raise TracksFormatError(f'line is {type(obj).__name__}, expected an object')
     if 'frame' not in obj or 'tracks' not in obj:
         raise TracksFormatError('object without "frame" or "tracks"')
     units = obj.get('units', 'm')
-    if units not in _UNITS:
-        raise TracksFormatError(f'unknown units {units!r} (known: {", ".join(_UNITS)})')
+    if not isinstance(units, str) or units not in _UNITS:
+        raise TracksFormatError(f'unknown units {repr(units)[:40]} (known: {", ".join(_UNITS)})')
     if not isinstance(obj['tracks'], list):
         raise TracksFormatError('"tracks" is not a list')
-    try:
-        frame = int(obj['frame'])
-    except (TypeError, ValueError):
-        raise TracksFormatError(f'frame {obj["frame"]!r} is not an integer') from None
+    frame = _integer(obj['frame'], 'frame', -_MAX_FRAME, _MAX_FRAME)
     stamp = obj.get('stamp')
-    return TracksFrame(frame=frame, stamp=None if stamp is None else float(stamp),
-                       layout=obj.get('layout'),
+    if stamp is not None:
+        stamp = _number(stamp, 'stamp', 1e12)
+    layout = obj.get('layout')
+    if layout is not None and not isinstance(layout, str):
+        raise TracksFormatError(f'layout {repr(layout)[:40]} is not a string')
+    return TracksFrame(frame=frame, stamp=stamp, layout=layout,
                        tracks=[_parse_track(t, _UNITS[units]) for t in obj['tracks']])
+
+
+#: Longest line read [bytes] (a frame of 100 people is ~0.2 MB).
+MAX_LINE_BYTES = 16 * 1024 * 1024
+
+
+def _lines(f: IO[bytes]) -> Iterator[Tuple[Optional[str], Optional[str]]]:
+    """Yield ``(text, None)`` per line, or ``(None, reason)`` for an unreadable one."""
+    while True:
+        raw = f.readline(MAX_LINE_BYTES + 1)
+        if not raw:
+            return
+        if len(raw) > MAX_LINE_BYTES and not raw.endswith(b'\n'):
+            while raw and not raw.endswith(b'\n'):      # skip the rest of the long line
+                raw = f.readline(MAX_LINE_BYTES)
+            yield None, f'line longer than {MAX_LINE_BYTES} bytes'
+            continue
+        try:
+            yield raw.decode('utf-8'), None
+        except UnicodeDecodeError as e:
+            yield None, f'not UTF-8 text (byte {e.start})'
 
 
 def read_tracks(path: str, issues: Optional[List[str]] = None) -> Iterator[TracksFrame]:
@@ -238,11 +307,13 @@ def read_tracks(path: str, issues: Optional[List[str]] = None) -> Iterator[Track
     Bad lines are reported (``path:line: reason``) in ``issues`` and the log, and skipped;
     blank lines are ignored.
     """
-    with open(path, encoding='utf-8') as f:
-        for n, line in enumerate(f, start=1):
-            if not line.strip():
+    with open(path, 'rb') as f:
+        for n, (line, problem) in enumerate(_lines(f), start=1):
+            if line is not None and not line.strip():
                 continue
             try:
+                if problem is not None:
+                    raise TracksFormatError(problem)
                 yield parse_line(line)
             except TracksFormatError as e:
                 msg = f'{path}:{n}: {e}'
