@@ -81,6 +81,50 @@ def test_dry_run_plans_one_pose2d_node_per_camera(rig):
     assert overrides['/**']['ros__parameters'] == {'use_sim_time': True}
 
 
+def test_numeric_camera_names_map_to_one_ros_name_everywhere(tmp_path):
+    K = np.array([[300.0, 0, W / 2], [0, 300.0, H / 2], [0, 0, 1]])
+    cams = {n: Camera.look_at(n, K, eye, (0, 0, 1), W, H)
+            for n, eye in zip(('00_03', '00_06'), ((4, 0, 2), (0, 4, 2)))}
+    path = str(tmp_path / 'rig.yaml')
+    save_rig_yaml(cams, path)
+    res = bringup('--rig', path, '--dry-run')
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    for cam in cams:
+        (line,) = [ln for ln in lines if ln.startswith(f'pose2d_node[{cam}]:')]
+        assert f'__ns:=/cam{cam} ' in line and f'image:=/cam{cam}/image_raw ' in line
+    overrides = yaml.safe_load(res.stdout.split('(passed last):\n', 1)[1].split('\n#')[0])
+    assert overrides['/cam00_06/pose2d_node']['ros__parameters']['camera_id'] == '00_06'
+    f = overrides['/**/fusion_node']['ros__parameters']
+    assert f['camera_ids'] == ['00_03', '00_06'] and f['input_topic'] == '/{camera}/persons_2d'
+    assert 'Fast DDS profile: ' in res.stdout and 'fastdds_shm.xml' in res.stdout
+    res = bringup('--rig', path, '--dry-run', '--dds-profile', 'none')
+    assert '# Fast DDS profile: none' in res.stdout
+
+
+@pytest.mark.parametrize('option, value, why', [
+    ('--image-topic', '/images', 'has no {camera}: all 2 cameras would share one name'),
+    ('--image-topic', '/{camera}/image-raw', "contains '-'"),
+    ('--image-topic', '/{camera}//image', 'empty token'),
+    ('--namespace', '/rig/{camera}/', 'ends with /'),
+])
+def test_invalid_topic_patterns_are_refused_before_starting(rig, option, value, why):
+    res = bringup('--rig', rig, option, value, '--dry-run')
+    assert res.returncode != 0 and option in res.stderr and why in res.stderr, res.stderr
+    assert 'pose2d_node[' not in res.stdout
+
+
+@pytest.mark.ros
+def test_a_dying_node_stops_bringup_with_its_name_and_reason(rig, tmp_path):
+    missing = tmp_path / 'no_such_model.onnx'
+    res = bringup('--rig', rig, '--pose2d-param', f'model.path:={missing}',
+                  '--pose2d-param', 'model.threads:=1', '--stop-timeout', '5')
+    assert res.returncode == 1, res.stderr
+    last = res.stderr.strip().splitlines()[-1]
+    assert re.search(r'exiting with 1 because pose2d_node\[cam_[ab]\] died \(exit code 1\): '
+                     r'.*no_such_model\.onnx', last), res.stderr[-3000:]
+
+
 def test_bad_rig_and_cameras_fail_with_clear_messages(rig, tmp_path):
     res = bringup('--rig', str(tmp_path / 'missing.yaml'), '--dry-run')
     assert res.returncode != 0 and 'cannot load rig' in res.stderr
@@ -110,7 +154,8 @@ def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
                                  reliable_qos())
     node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', tracks.append,
                              reliable_qos())
-    pubs = {c: node.create_publisher(Image, f'/{c}/image', reliable_qos(5)) for c in CAMS}
+    # the default --image-topic, where mv3dpose_image_publisher --camera publishes
+    pubs = {c: node.create_publisher(Image, f'/{c}/image_raw', reliable_qos(5)) for c in CAMS}
 
     def spin_until(pred, timeout):
         deadline = time.monotonic() + timeout

@@ -31,26 +31,38 @@ Child processes rather than one process with a MultiThreadedExecutor, because:
 Overrides go into a generated params file passed last, because a node-specific key of a
 params file (``/**/fusion_node``) wins over ``-p`` (which applies to ``/**``). Ctrl-C (SIGINT)
 or SIGTERM stops all children: SIGINT to each, then SIGTERM after ``--stop-timeout``, then
-SIGKILL. A child that dies is reported with its exit code; a dead fusion_node stops the
-bringup (exit 1) unless ``--respawn`` restarts it, a dead pose2d_node is restarted only with
-``--respawn``.
+SIGKILL. Child output is forwarded line by line. A child that dies stops everything and
+bringup exits 1 with a last line naming the node, its exit code and the last error line of its
+output (a rig with a silently missing camera is worse than a clear stop), unless ``--respawn``
+restarts it.
+
+Names: ``{camera}`` in ``--namespace`` and ``--image-topic`` is the camera's ROS name
+(``ros/names.py``: ``00_03`` -> ``cam00_03``); both are validated before anything starts. The
+children get the Fast DDS profile ``config/fastdds_shm.xml`` (HD images over shared memory)
+unless ``FASTRTPS_DEFAULT_PROFILES_FILE`` or ``--dds-profile`` says otherwise.
 """
 
 import argparse
+import collections
 import os
 import shlex
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
 from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.ros.names import camera_topic, check_pattern, RosNameError
 from mv3dpose_ros.ros.params import package_search_dirs, resolve_path
 import yaml
 
 DEFAULT_PARAMS = ('config/pose2d.yaml', 'config/fusion.yaml')
+DEFAULT_IMAGE_TOPIC = '/{camera}/image_raw'
+DDS_PROFILE = 'config/fastdds_shm.xml'
+PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 
 
 def _executable(name: str) -> List[str]:
@@ -128,12 +140,15 @@ class Plan:
                              f'({", ".join(rig_cameras)})')
         self.cameras = list(cams)
         ns_pattern = args.namespace
-        self.namespaces = {c: ns_pattern.replace('{camera}', c) for c in self.cameras}
-        bad = [ns for ns in self.namespaces.values()
-               if any(tok[:1].isdigit() for tok in ns.strip('/').split('/'))]
-        if bad and not args.no_pose2d:
-            raise SystemExit(f'bringup: namespaces {bad} are invalid ROS names (a token starts '
-                             "with a digit): use e.g. --namespace '/cam{camera}'")
+        # {camera} is the camera's ROS name (ros/names.py: 00_03 -> cam00_03), as in fusion_node.
+        try:
+            check_pattern(ns_pattern, self.cameras, '--namespace')
+            check_pattern(ns_pattern.rstrip('/') + '/persons_2d', self.cameras, '--namespace')
+            if not args.no_pose2d:
+                check_pattern(args.image_topic, self.cameras, '--image-topic')
+        except RosNameError as exc:
+            raise SystemExit(f'bringup: {exc}')
+        self.namespaces = {c: camera_topic(ns_pattern, c) for c in self.cameras}
         overrides: Dict[str, Any] = {}
         pose2d_over = _parse_assignments(args.pose2d_param or [], '--pose2d-param')
         for cam, ns in self.namespaces.items():
@@ -147,6 +162,7 @@ class Plan:
             overrides['/**'] = {'ros__parameters': {'use_sim_time': True}}
         self.overrides = overrides
         self.args = args
+        self.env, self.dds_profile = _dds_env(args.dds_profile, search)
 
     def commands(self, override_file: str) -> Dict[str, List[str]]:
         """Return ``{process name: argv}``."""
@@ -156,36 +172,91 @@ class Plan:
         out = {}
         if not self.args.no_pose2d:
             for cam, ns in self.namespaces.items():
-                argv = _executable('pose2d_node') + ['--ros-args', '-r', f'__ns:={ns}']
-                if self.args.image_topic:
-                    argv += ['-r', f'image:={self.args.image_topic.replace("{camera}", cam)}']
+                argv = _executable('pose2d_node') + ['--ros-args', '-r', f'__ns:={ns}',
+                                                     '-r', 'image:=' + camera_topic(
+                                                         self.args.image_topic, cam)]
                 out[f'pose2d_node[{cam}]'] = argv + files
         out['fusion_node'] = _executable('fusion_node') + ['--ros-args'] + files
         return out
 
 
+def _dds_env(profile: Optional[str], search: Sequence[str]) -> Tuple[Dict[str, str], str]:
+    """Return the children's environment with the Fast DDS profile applied, and its path."""
+    env = dict(os.environ)
+    env['PYTHONUNBUFFERED'] = '1'          # child output is forwarded line by line
+    if profile is None:
+        profile = next((env[v] for v in PROFILE_VARS if env.get(v)), DDS_PROFILE)
+    if profile.strip().lower() == 'none':
+        for var in PROFILE_VARS:
+            env.pop(var, None)
+        return env, ''
+    path = os.path.abspath(resolve_path(profile, search))
+    if not os.path.isfile(path):
+        raise SystemExit(f'bringup: Fast DDS profile {path!r} not found (--dds-profile)')
+    env[PROFILE_VARS[0]] = path
+    return env, path
+
+
+def _reason(lines: Sequence[str]) -> str:
+    """Return the line of a dead child's output that says why (last error, else last line)."""
+    lines = [ln.strip() for ln in lines if ln.strip()]
+    for marker in ('[FATAL]', '[ERROR]', 'Error', 'error:'):
+        hits = [ln for ln in lines if marker in ln]
+        if hits:
+            return hits[-1]
+    return lines[-1] if lines else 'no output'
+
+
 class Supervisor:
-    """Start, watch and stop the child processes."""
+    """Start, watch and stop the child processes; forward their output."""
 
     def __init__(self, commands: Dict[str, List[str]], respawn: bool, stop_timeout: float,
-                 log: Any = sys.stderr) -> None:
+                 log: Any = sys.stderr, env: Optional[Dict[str, str]] = None) -> None:
         self.commands = commands
         self.respawn = respawn
         self.stop_timeout = stop_timeout
         self.log = log
+        self.env = env
         self.procs: Dict[str, subprocess.Popen] = {}
+        self.tails: Dict[str, Deque[str]] = {}
+        self._readers: Dict[str, threading.Thread] = {}
+        self._log_lock = threading.Lock()
         self.stopping = False
         self.failed = False
+        self.died: Dict[str, str] = {}
 
     def say(self, text: str) -> None:
         """Print one bringup status line."""
-        print(f'[bringup] {text}', file=self.log, flush=True)
+        with self._log_lock:
+            print(f'[bringup] {text}', file=self.log, flush=True)
+
+    def _forward(self, name: str, stream: Any) -> None:
+        """Copy a child's output to our log line by line, keeping the last lines."""
+        tail = self.tails[name]
+        for line in iter(stream.readline, ''):
+            tail.append(line)
+            with self._log_lock:
+                self.log.write(line)
+                self.log.flush()
+        stream.close()
 
     def start(self, name: str) -> None:
         """Start (or restart) process ``name`` in its own session (we deliver the signals)."""
-        self.procs[name] = subprocess.Popen(self.commands[name], start_new_session=True)
-        self.say(f'started {name} (pid {self.procs[name].pid}): '
+        proc = subprocess.Popen(self.commands[name], start_new_session=True, env=self.env,
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                errors='replace', bufsize=1)
+        self.procs[name] = proc
+        self.tails[name] = collections.deque(maxlen=40)
+        self._readers[name] = threading.Thread(target=self._forward, args=(name, proc.stdout),
+                                               daemon=True)
+        self._readers[name].start()
+        self.say(f'started {name} (pid {proc.pid}): '
                  f'{" ".join(shlex.quote(a) for a in self.commands[name])}')
+
+    def _exit_text(self, name: str, code: int) -> str:
+        self._readers[name].join(timeout=2.0)     # the output up to the exit
+        how = (f'killed by {signal.Signals(-code).name}' if code < 0 else f'exit code {code}')
+        return f'{name} died ({how}): {_reason(self.tails[name])}'
 
     def request_stop(self, signum: int = signal.SIGINT, frame: Any = None) -> None:
         """Signal handler: begin a clean shutdown."""
@@ -200,17 +271,17 @@ class Supervisor:
                 code = proc.poll()
                 if code is None or self.stopping:
                     continue
-                self.say(f'{name} exited with code {code}')
+                text = self._exit_text(name, code)
+                self.say(text)
                 if self.respawn:
                     time.sleep(1.0)
                     self.start(name)
-                elif name == 'fusion_node':
-                    self.say('fusion_node is gone: stopping everything')
+                else:
+                    self.died[name] = text
+                    self.say(f'stopping everything because {name} is gone (--respawn restarts '
+                             'nodes that exit)')
                     self.failed = True
                     self.stopping = True
-                else:
-                    del self.procs[name]
-                    self.say(f'continuing without {name} (use --respawn to restart it)')
             time.sleep(0.1)
         return self.stop()
 
@@ -238,15 +309,17 @@ class Supervisor:
             self.say(f'exit codes: {bad}')
         else:
             self.say('all nodes stopped cleanly')
+        for text in self.died.values():
+            self.say(f'exiting with 1 because {text}')
         return 1 if self.failed or bad else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the command-line parser of ``bringup``."""
     p = argparse.ArgumentParser(
-        prog='bringup', description='Start one pose2d_node per camera plus fusion_node.',
-        epilog='Example: bringup --rig config/rigs/my_rig.yaml --image-topic '
-               "'/{camera}/image_raw' --pose2d-param model.name:=yolo11n-pose")
+        prog='mv3dpose_bringup', description='Start one pose2d_node per camera plus '
+        'fusion_node.', epilog='Example: mv3dpose_bringup --rig config/rigs/my_rig.yaml '
+        '--pose2d-param model.name:=yolo11n-pose')
     p.add_argument('--rig', help='rig calibration file (default: fusion_node rig_config of '
                    'the params files)')
     p.add_argument('--cameras', nargs='+', help='camera ids (default: camera_ids, else all '
@@ -254,9 +327,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--params-file', action='append', help='ROS params file(s) for all nodes '
                    f'(default: {" ".join(DEFAULT_PARAMS)})')
     p.add_argument('--namespace', default='/{camera}', help='namespace of each camera '
-                   "(default '/{camera}'); pose2d publishes <namespace>/persons_2d")
-    p.add_argument('--image-topic', help="image topic per camera, e.g. '/{camera}/image_raw' "
-                   '(default: <namespace>/image)')
+                   "(default '/{camera}'); pose2d publishes <namespace>/persons_2d. {camera} is "
+                   'the camera id, or cam<id> when the id is no valid ROS name (00_03 -> '
+                   'cam00_03)')
+    p.add_argument('--image-topic', default=DEFAULT_IMAGE_TOPIC,
+                   help=f"image topic per camera (default '{DEFAULT_IMAGE_TOPIC}', where "
+                   'mv3dpose_image_publisher --camera NAME publishes)')
+    p.add_argument('--dds-profile', default=None, metavar='XML',
+                   help='Fast DDS XML profile for the nodes (default: '
+                   '$FASTRTPS_DEFAULT_PROFILES_FILE, else the shipped config/fastdds_shm.xml, '
+                   "which carries HD images over shared memory); 'none' = Fast DDS defaults")
     p.add_argument('--pose2d-param', action='append', metavar='NAME:=VALUE',
                    help='override a pose2d_node parameter (repeatable)')
     p.add_argument('--fusion-param', action='append', metavar='NAME:=VALUE',
@@ -287,11 +367,13 @@ def main(argv: Optional[List[str]] = None) -> int:
                 print(f'{name}: {" ".join(shlex.quote(a) for a in argv_)}')
             print('# generated override params file (passed last):')
             print(yaml.safe_dump(plan.overrides, sort_keys=False), end='')
+            print(f'# Fast DDS profile: {plan.dds_profile or "none (Fast DDS defaults)"}')
             return 0
-        sup = Supervisor(commands, args.respawn, args.stop_timeout)
+        sup = Supervisor(commands, args.respawn, args.stop_timeout, env=plan.env)
         signal.signal(signal.SIGINT, sup.request_stop)
         signal.signal(signal.SIGTERM, sup.request_stop)
-        sup.say(f'rig {plan.rig_path}: cameras {", ".join(plan.cameras)}')
+        sup.say(f'rig {plan.rig_path}: cameras {", ".join(plan.cameras)}; Fast DDS profile '
+                f'{plan.dds_profile or "none"}')
         return sup.run()
     finally:
         try:
