@@ -47,6 +47,7 @@ setup(
             'fusion_node = mv3dpose_ros.nodes.fusion_node:main',
             'mv3dpose_bringup = mv3dpose_ros.nodes.bringup:main',
             'mv3dpose_image_publisher = mv3dpose_ros.nodes.image_publisher:main',
+            'mv3dpose_foxglove_view = mv3dpose_ros.nodes.foxglove_view:main',
             # Deprecated aliases, kept for one release (0.1.x): generic names that can collide
             # with other packages' scripts on a PATH. Removed in 0.2.0.
             'bringup = mv3dpose_ros.nodes.aliases:bringup',
