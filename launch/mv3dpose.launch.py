@@ -51,11 +51,12 @@ def _nodes(context, *args, **kwargs):
     fusion_params = LaunchConfiguration('fusion_params').perform(context) or \
         os.path.join(share, 'config', 'fusion.yaml')
     nodes = []
-    for cam in cameras:
-        remaps = [('image', image_topic.replace('{camera}', cam))] if image_topic else []
+    from mv3dpose_ros.ros.names import camera_namespace, camera_topic
+    for cam in cameras:   # {camera} and namespaces: the camera's ROS name (00_03 -> cam00_03)
+        remaps = [('image', camera_topic(image_topic or '/{camera}/image_raw', cam))]
         nodes.append(Node(
             package='mv3dpose_ros', executable='pose2d_node', name='pose2d_node',
-            namespace=cam, output='screen', remappings=remaps,
+            namespace=camera_namespace(cam), output='screen', remappings=remaps,
             parameters=[pose2d_params, {'camera_id': cam, 'use_sim_time': sim_time}]))
     nodes.append(Node(
         package='mv3dpose_ros', executable='fusion_node', name='fusion_node', output='screen',
@@ -71,9 +72,9 @@ def generate_launch_description():
         DeclareLaunchArgument('rig', default_value='', description='rig calibration file'),
         DeclareLaunchArgument('cameras', default_value='',
                               description='comma-separated camera ids (empty: all of the rig)'),
-        DeclareLaunchArgument('image_topic', default_value='',
-                              description="image topic per camera, e.g. '/{camera}/image_raw' "
-                                          '(empty: /<camera>/image)'),
+        DeclareLaunchArgument('image_topic', default_value='/{camera}/image_raw',
+                              description='image topic per camera ({camera}: the camera ROS '
+                                          'name, as mv3dpose_bringup --image-topic)'),
         DeclareLaunchArgument('pose2d_params', default_value='',
                               description='pose2d_node params file (default: the shipped one)'),
         DeclareLaunchArgument('fusion_params', default_value='',
