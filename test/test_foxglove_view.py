@@ -1,0 +1,239 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+mv3dpose_foxglove_view as its own process, checked by a real Foxglove WebSocket client.
+
+The test process publishes, over DDS, the real Pose2Sim detections (4 cameras) and the tracks
+``Fusion.step`` makes of them; ``mv3dpose_foxglove_view`` serves them; the client
+(``io/foxglove_ws.py``, the ``websockets`` package speaking ``foxglove.sdk.v1``) checks that the
+channels are advertised with their schemas and that every message it receives decodes with the
+advertised schema alone and carries what was published. A picture of the received scene is drawn
+by ``ros/scene.render_scene`` (set ``MV3DPOSE_FOXGLOVE_PNG=path`` to keep it).
+"""
+
+import asyncio
+import os
+import socket
+import subprocess
+import threading
+import time
+
+from conftest import interrupt
+from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
+from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.skeleton import get_layout
+from mv3dpose_ros.core.types import TrackState
+from mv3dpose_ros.io.foxglove_ws import FoxgloveClient
+from mv3dpose_ros.ros.markers import track_color
+from mv3dpose_ros.ros.messages import person2d_array_to_numpy, stamp_to_ns, tracks_to_msg
+from mv3dpose_ros.ros.qos import reliable_qos
+from mv3dpose_ros.ros.scene import frustum_points, latest_entities, render_scene
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from real_feed import LAYOUT, Pose2Sim
+from std_msgs.msg import Header
+
+pytestmark = [pytest.mark.ros]
+
+SCENE, CAMERAS, TRACKS = '/mv3dpose/scene', '/mv3dpose/cameras', '/fusion_node/tracks'
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+class Feeder:
+    """Publishes the Pose2Sim detections and their tracks at 30 Hz, looping, from a thread."""
+
+    def __init__(self, feed: Pose2Sim):
+        self.feed = feed
+        fusion = Fusion(feed.cameras, LAYOUT)
+        self.frames = []          # (stamp_ns, {cam: Person2DArray}, TrackedSkeletonArray)
+        for i, (_, _) in enumerate(feed.frames):
+            msgs = dict(feed.messages(i))
+            views = {c: person2d_array_to_numpy(m, 25).astype(np.float32).astype(np.float64)
+                     for c, m in msgs.items()}
+            tracks = fusion.step(views, feed.stamp_ns(i) / 1e9)
+            header = Header(stamp=msgs['cam_01'].header.stamp, frame_id='map')
+            self.frames.append((feed.stamp_ns(i), msgs, tracks_to_msg(tracks, header, LAYOUT)))
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node('foxglove_feeder', context=self.ctx)
+        self.tracks_pub = self.node.create_publisher(TrackedSkeletonArray, TRACKS,
+                                                     reliable_qos(10))
+        self.pubs = {c: self.node.create_publisher(Person2DArray, f'/{c}/persons_2d',
+                                                   reliable_qos(20)) for c in feed.cameras}
+        self.garbage = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def matched(self) -> bool:
+        return self.tracks_pub.get_subscription_count() > 0 and \
+            all(p.get_subscription_count() for p in self.pubs.values())
+
+    def start(self):
+        self._thread.start()
+
+    def _run(self):
+        i = 0
+        while not self._stop.is_set():
+            _, msgs, tracks = self.frames[i % len(self.frames)]
+            for cam, m in msgs.items():
+                self.pubs[cam].publish(m)
+            if i == 5:        # unreadable bytes on the tracks topic: dropped, view keeps going
+                self.tracks_pub.publish(b'\x00\x01\x00\x00\xff\xff\xff\x7f')
+                self.garbage += 1
+            self.tracks_pub.publish(tracks)
+            i += 1
+            time.sleep(1 / 30)
+
+    def close(self):
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def view(shared_data, tmp_path):
+    feed = Pose2Sim(shared_data, frames=40)
+    port = free_port()
+    log_path = tmp_path / 'foxglove_view.log'
+    log = open(log_path, 'w')
+    proc = subprocess.Popen(['mv3dpose_foxglove_view', '--rig', feed.rig_path, '--port',
+                             str(port)], stdout=log, stderr=subprocess.STDOUT,
+                            start_new_session=True)
+    feeder = Feeder(feed)
+    executor = SingleThreadedExecutor(context=feeder.ctx)
+    executor.add_node(feeder.node)
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not feeder.matched():
+            assert proc.poll() is None, log_path.read_text()
+            executor.spin_once(timeout_sec=0.05)
+        assert feeder.matched(), 'foxglove_view never subscribed: ' + log_path.read_text()
+        feeder.start()
+        yield f'ws://127.0.0.1:{port}', feeder, proc, log_path
+    finally:
+        feeder.close()
+        code = interrupt(proc, 10)
+        log.close()
+    assert code == 0, log_path.read_text()
+
+
+def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
+    url, feeder, proc, log_path = view
+    cams = list(feeder.feed.cameras)
+    det_topics = [f'/{c}/persons_2d' for c in cams]
+
+    async def session():
+        async with FoxgloveClient(url) as client:
+            await client.wait_for_topics([SCENE, CAMERAS, TRACKS] + det_topics, 15.0)
+            adv = client.topics()
+            await client.subscribe([SCENE, CAMERAS, TRACKS] + det_topics)
+
+            def enough(got):
+                seen = {m.topic for m in got}
+                tracks = [m for m in got if m.topic == TRACKS]
+                return seen >= {SCENE, CAMERAS, TRACKS, *det_topics} and len(tracks) >= 20
+            return client.server_info, adv, await client.receive(20.0, enough)
+
+    info, adv, got = asyncio.run(session())
+    assert info['op'] == 'serverInfo' and info['name'] == 'mv3dpose'
+    assert adv[SCENE]['schemaName'] == 'foxglove.SceneUpdate'
+    assert adv[SCENE]['encoding'] == adv[SCENE]['schemaEncoding'] == 'protobuf'
+    assert adv[TRACKS]['schemaName'] == 'mv3dpose_msgs/msg/TrackedSkeletonArray'
+    assert (adv[TRACKS]['encoding'], adv[TRACKS]['schemaEncoding']) == ('cdr', 'ros2msg')
+    assert 'MSG: mv3dpose_msgs/Joint3D' in adv[TRACKS]['schema']        # nested definitions
+    for t in det_topics:
+        assert adv[t]['schemaName'] == 'mv3dpose_msgs/msg/Person2DArray'
+
+    by_stamp = {stamp: (msgs, tracks) for stamp, msgs, tracks in feeder.frames}
+    # Tracks: decoded from the advertised ros2msg schema (rosbags), equal to what was published.
+    tracks_rx = [m for m in got if m.topic == TRACKS]
+    assert len(tracks_rx) >= 20
+    for m in tracks_rx:
+        stamp = m.decoded.header.stamp.sec * 10**9 + m.decoded.header.stamp.nanosec
+        _, sent = by_stamp[stamp]
+        assert m.log_time == stamp
+        assert [s.track_id for s in m.decoded.skeletons] == [s.track_id for s in sent.skeletons]
+        for a, b in zip(m.decoded.skeletons, sent.skeletons):
+            assert (a.position.x, a.position.y, a.position.z) == \
+                (b.position.x, b.position.y, b.position.z)
+            assert a.state == b.state and len(a.joints) == len(b.joints) == 25
+    # Detections: same keypoints as published (float32 on the wire).
+    for m in (m for m in got if m.topic in det_topics):
+        msgs, _ = by_stamp[m.log_time]
+        cam = m.decoded.camera_id
+        sent = person2d_array_to_numpy(msgs[cam], 25)
+        rx = np.array([[[k.x, k.y, k.confidence] for k in p.keypoints]
+                       for p in m.decoded.persons]).reshape(-1, 25, 3)
+        np.testing.assert_allclose(rx, sent, atol=1e-3)
+    # Scene: one entity per live track, joints at the published positions, coloured by id.
+    scene_rx = [m for m in got if m.topic == SCENE]
+    bones = get_layout(LAYOUT).bones
+    checked = 0
+    for m in scene_rx:
+        _, sent = by_stamp[m.log_time]
+        live = {s.track_id: s for s in sent.skeletons if s.state != TrackState.DELETED}
+        ents = {e['id']: e for e in m.decoded.get('entities', [])}
+        assert set(ents) == {f'person/{i}' for i in live}
+        for tid, s in live.items():
+            e = ents[f'person/{tid}']
+            assert e['frame_id'] == 'map'
+            [line] = e['lines']
+            assert line['type'] == 'LINE_LIST'
+            valid = [j for j in s.joints if j.state != 0]
+            pts = np.array([[p.get(k, 0.0) for k in 'xyz'] for p in line['points']])
+            want = np.array([[j.position.x, j.position.y, j.position.z] for j in valid])
+            np.testing.assert_allclose(pts, want, atol=1e-9)
+            assert len(line.get('indices', [])) <= 2 * len(bones)
+            r, g, b = track_color(tid)
+            assert (line['color']['r'], line['color']['g'], line['color']['b']) == \
+                pytest.approx((r, g, b))
+            assert e['texts'][0]['text'].startswith(f'#{tid} ')
+            checked += 1
+    assert checked >= 10
+    # Cameras: one frustum per rig camera, apex at the camera centre.
+    cam_ents = latest_entities([m.decoded for m in got if m.topic == CAMERAS])
+    assert set(cam_ents) == {f'camera/{c}' for c in cams}
+    for c, cam in feeder.feed.cameras.items():
+        apex = cam_ents[f'camera/{c}']['lines'][0]['points'][0]
+        np.testing.assert_allclose([apex.get(k, 0.0) for k in 'xyz'],
+                                   frustum_points(cam, 0.5)[0], atol=1e-9)
+    # The unreadable message was dropped with a reason, and data kept flowing after it.
+    assert feeder.garbage == 1
+    assert any(stamp_to_ns(m.decoded.header.stamp) for m in tracks_rx)
+    # The picture of what the client received, drawn from the received scene messages only.
+    ents = latest_entities([m.decoded for m in got if m.topic in (SCENE, CAMERAS)])
+    picture = render_scene(ents, f'Foxglove client: {len(scene_rx)} scene updates received')
+    colours = {tuple(int(round(255 * c)) for c in reversed(track_color(int(i.split('/')[1]))))
+               for i in ents if i.startswith('person/')}
+    assert colours, 'no skeleton in the last scene'
+    for bgr in colours:
+        assert np.any(np.all(picture == bgr, axis=-1)), f'track colour {bgr} not drawn'
+    out = os.environ.get('MV3DPOSE_FOXGLOVE_PNG') or str(tmp_path / 'foxglove_scene.png')
+    from mv3dpose_ros.commands.render import write_png
+    write_png(picture, out)
+    print(f'\nFoxglove client: {len(got)} messages ({len(tracks_rx)} tracks, {len(scene_rx)} '
+          f'scene updates); picture {out}')
+    time.sleep(0.5)
+    assert 'unreadable TrackedSkeletonArray dropped' in log_path.read_text()
+    assert proc.poll() is None
