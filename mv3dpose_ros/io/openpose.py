@@ -14,7 +14,7 @@
 
 
 """
-Read OpenPose JSON detections: one folder per camera, one file per frame.
+Read (and write) OpenPose JSON detections: one folder per camera, one file per frame.
 
 Each file holds ``{"people": [{"pose_keypoints_2d": [x, y, c, ...]}, ...]}`` in raw image
 pixels (OpenPose's own ``--write_json`` output, also what Pose2Sim reads). A joint with
@@ -143,6 +143,30 @@ def read_openpose_file(path: str, num_joints: Optional[int] = None) -> np.ndarra
         return _read(path, num_joints)
     except OpenPoseFormatError as e:
         raise OpenPoseFormatError(f'{path}: {e}') from None
+
+
+def openpose_filename(camera: str, frame: int) -> str:
+    """Return OpenPose's file name of a frame: ``<camera>_<frame:012d>_keypoints.json``."""
+    return f'{camera}_{int(frame):012d}_keypoints.json'
+
+
+def write_openpose_file(path: str, poses: np.ndarray, decimals: int = 3) -> None:
+    """
+    Write ``[P, J, 3]`` poses (x, y, confidence) as one OpenPose JSON file, as OpenPose does.
+
+    Missing joints (confidence 0) are written ``0, 0, 0``; the file is written to a temporary
+    name and renamed, so a reader never sees half a file.
+    """
+    import json
+    people = []
+    for pose in np.asarray(poses, dtype=np.float64):
+        pose = np.where(pose[:, 2:3] > 0, pose, 0.0)
+        people.append({'person_id': [-1], 'pose_keypoints_2d': [
+            round(float(v), decimals) for v in pose.ravel()]})
+    tmp = f'{path}.tmp'
+    with open(tmp, 'w', encoding='utf-8') as f:
+        json.dump({'version': 1.3, 'people': people}, f, separators=(',', ':'))
+    os.replace(tmp, path)
 
 
 def index_folder(folder: str, issues: Optional[List[FileIssue]] = None) -> Dict[int, str]:

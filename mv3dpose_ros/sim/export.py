@@ -22,11 +22,11 @@ Write a synthetic scene to the files the offline tools read.
 Lines schema, ids = person index, as ``mv3dpose eval --format tracks`` reads).
 """
 
-import json
 import os
 from typing import Dict
 
 from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
 from mv3dpose_ros.io.tracks_jsonl import poses_to_line
 from mv3dpose_ros.sim.scene import Scene
 import numpy as np
@@ -40,12 +40,8 @@ def write_openpose(scene: Scene, root: str) -> Dict[str, str]:
         os.makedirs(folder, exist_ok=True)
         folders[name] = folder
         for t, views in enumerate(scene.views):
-            poses = views.get(name, np.zeros((0, 0, 3)))
-            people = [{'person_id': [-1], 'pose_keypoints_2d': [round(float(v), 3)
-                                                                for v in p.ravel()]}
-                      for p in poses]
-            with open(os.path.join(folder, f'{name}_{t:012d}_keypoints.json'), 'w') as f:
-                json.dump({'version': 1.3, 'people': people}, f, separators=(',', ':'))
+            write_openpose_file(os.path.join(folder, openpose_filename(name, t)),
+                                views.get(name, np.zeros((0, 0, 3))))
     return folders
 
 
