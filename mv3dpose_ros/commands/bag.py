@@ -18,23 +18,30 @@
 record  subscribes with ``raw=True`` (no decoding cost) and writes the CDR bytes as they arrive,
         MCAP by default; the publishers' QoS is stored as ``offered_qos_profiles`` so that a
         replay offers the same QoS. Stops on ``--duration``, ``--count``, ``--idle-timeout``,
-        Ctrl-C or SIGTERM and always finishes a valid bag.
+        Ctrl-C or SIGTERM and always finishes a valid bag. Every ``--checkpoint`` seconds
+        (default 1) the pending chunk is closed and flushed, so a recorder killed with SIGKILL
+        (or a power cut after the OS wrote it) loses at most the messages of its last
+        second: ``bag recover`` turns the hidden ``.NAME.partial-PID`` folder into a bag.
+        ``--overwrite`` replaces an existing bag only, never another file or folder.
 play    publishes the raw bytes at the recorded pace (``--rate``), each preceded by a
         ``rosgraph_msgs/Clock`` carrying the message's bag time, so nodes with ``use_sim_time``
         follow the bag; ``--loop`` makes the clock jump back, which the fusion node treats as
         a reset.
 info    prints topics, types, counts, QoS, duration and storage.
+recover salvages interrupted recordings (``.NAME.partial-PID`` of dead processes) into bags.
 """
 
 import argparse
 import importlib
 import json
+import re
 import signal
 import sys
 import time
 from typing import Dict, Iterable, List, Optional, Sequence
 
-from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, STORAGES
+from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, partial_dirs
+from mv3dpose_ros.io.bag import salvage, STORAGES
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 
@@ -164,19 +171,27 @@ def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = D
            duration: Optional[float] = None, count: Optional[int] = None,
            idle_timeout: Optional[float] = None, discovery_interval: float = 0.5,
            overwrite: bool = False, use_sim_time: bool = False, quiet: bool = False,
-           context=None) -> Dict[str, int]:
+           context=None, checkpoint: float = 1.0) -> Dict[str, int]:
     """
     Record ``topics`` (all discovered ones when empty) into a bag at ``output``.
 
     Stops after ``duration`` seconds, ``count`` messages, ``idle_timeout`` seconds without a
-    message (once one arrived), or on SIGINT / SIGTERM. Returns messages per topic.
+    message (once one arrived), or on SIGINT / SIGTERM. Every ``checkpoint`` seconds what was
+    recorded is made crash-safe (``BagWriter.checkpoint``). Returns messages per topic.
     """
+    if not checkpoint > 0:
+        raise ValueError(f'--checkpoint must be > 0 s, got {checkpoint}')
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
     wanted = list(topics or [])
     writer = BagWriter(output, storage=storage, overwrite=overwrite)   # fails before any DDS
+    stale = partial_dirs(output)
+    if stale and not quiet:
+        print(f'warning: interrupted recording(s) of {output} found: '
+              f'{", ".join(str(d) for d in stale)}; run `mv3dpose bag recover {output}` '
+              'to salvage them', file=sys.stderr)
     own_context = context is None
     if own_context:
         context = _init_rclpy()
@@ -224,10 +239,14 @@ def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = D
 
     start = time.monotonic()
     next_discovery = start
+    next_checkpoint = start + checkpoint
     try:
         with _StopFlag() as flag:
             while not flag.stop and context.ok():
                 now = time.monotonic()
+                if now >= next_checkpoint:
+                    writer.checkpoint()
+                    next_checkpoint = now + checkpoint
                 if duration is not None and now - start >= duration:
                     break
                 if count is not None and state['total'] >= count:
@@ -477,11 +496,51 @@ def format_info(summary: dict) -> str:
     return '\n'.join(lines)
 
 
+# ------------------------------------------------------------------------------------ recover
+
+def recover(path: str, output: Optional[str] = None, overwrite: bool = False,
+            keep: bool = False) -> List[dict]:
+    """
+    Salvage interrupted recordings into bags; return one summary per recovered folder.
+
+    ``path`` is a ``.NAME.partial-PID`` folder, or the bag path ``NAME`` the recorder was
+    writing, whose partial folders of dead processes are then all recovered. The bag goes to
+    ``output`` (default ``NAME``; with several folders ``NAME.recovered-PID``). The partial
+    folder is removed afterwards unless ``keep``.
+    """
+    import shutil
+    from pathlib import Path
+    src = Path(path.rstrip('/'))
+    match = re.match(r'^\.(.+)\.partial-(\d+)$', src.name)
+    if match and src.is_dir():
+        sources, target = [src], src.parent / match.group(1)
+    else:
+        sources, target = partial_dirs(src), src
+        if not sources:
+            raise BagError(f'{path}: no interrupted recording to recover (no '
+                           f'.{src.name}.partial-PID folder of a dead process beside it)')
+    results = []
+    for d in sources:
+        pid = d.name.rsplit('-', 1)[-1]
+        out = Path(output) if output else target
+        if len(sources) > 1 and not output:
+            out = target.parent / f'{target.name}.recovered-{pid}'
+        elif len(sources) > 1:
+            out = Path(f'{output}.{pid}')
+        report = salvage(d, out, overwrite=overwrite)
+        if not keep:
+            shutil.rmtree(d, ignore_errors=True)
+        results.append({'source': str(d), 'output': str(report.output),
+                        'messages': report.messages, 'topics': report.topics,
+                        'lost_tail_bytes': report.lost_tail_bytes, 'note': report.note})
+    return results
+
+
 # ------------------------------------------------------------------------------------ CLI
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``record``, ``play`` and ``info`` subcommands."""
-    sub = parser.add_subparsers(dest='bag_command', metavar='{record,play,info}')
+    sub = parser.add_subparsers(dest='bag_command', metavar='{record,play,info,recover}')
     sub.required = True
     rec = sub.add_parser('record', help='record topics into a rosbag2 bag (MCAP by default)')
     rec.add_argument('topics', nargs='*',
@@ -495,7 +554,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help='stop when no message arrived for this many seconds (after the first)')
     rec.add_argument('--use-sim-time', action='store_true',
                      help='stamp messages with /clock time instead of the system time')
-    rec.add_argument('--overwrite', action='store_true', help='replace an existing output')
+    rec.add_argument('--overwrite', action='store_true',
+                     help='replace an existing bag at the output (never another file or folder)')
+    rec.add_argument('--checkpoint', type=float, default=1.0, metavar='SECONDS',
+                     help='make the recording crash-safe this often: a recorder killed with '
+                          'SIGKILL loses at most the last interval (default 1 s)')
     rec.add_argument('-q', '--quiet', action='store_true')
 
     ply = sub.add_parser('play', help='publish the messages of a bag with /clock')
@@ -522,6 +585,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     inf.add_argument('bag', help='bag directory or .mcap / .db3 file')
     inf.add_argument('--json', action='store_true', help='print JSON instead of text')
 
+    rcv = sub.add_parser('recover', help='salvage an interrupted recording (.NAME.partial-PID) '
+                                         'into a bag')
+    rcv.add_argument('bag', help='the bag path the recorder wrote to, or its .NAME.partial-PID '
+                                 'folder')
+    rcv.add_argument('-o', '--output', help='where to write the bag (default: the bag path)')
+    rcv.add_argument('--overwrite', action='store_true', help='replace an existing bag')
+    rcv.add_argument('--keep', action='store_true', help='keep the partial folder')
+
 
 def run(args: argparse.Namespace) -> int:
     """Run ``mv3dpose bag <record|play|info>``."""
@@ -534,7 +605,8 @@ def run(args: argparse.Namespace) -> int:
             counts = record(args.output, args.topics, storage=args.storage,
                             duration=args.duration, count=args.count,
                             idle_timeout=args.idle_timeout, overwrite=args.overwrite,
-                            use_sim_time=args.use_sim_time, quiet=args.quiet)
+                            use_sim_time=args.use_sim_time, quiet=args.quiet,
+                            checkpoint=args.checkpoint)
             total = sum(counts.values())
             print(f'wrote {args.output}: {total} messages on {len(counts)} topics'
                   + ''.join(f'\n  {t}: {n}' for t, n in sorted(counts.items())))
@@ -548,11 +620,17 @@ def run(args: argparse.Namespace) -> int:
             if not args.quiet:
                 print(f'played {n} messages from {args.bag}')
             return 0
-    except (BagError, ValueError) as exc:
+        if args.bag_command == 'recover':
+            for r in recover(args.bag, args.output, args.overwrite, args.keep):
+                print(f'recovered {r["messages"]} messages from {r["source"]} into '
+                      f'{r["output"]} ({r["note"]})'
+                      + ''.join(f'\n  {t}: {n}' for t, n in sorted(r['topics'].items())))
+            return 0
+    except (BagError, ValueError, OSError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
     return 2
 
 
-__all__ = ['add_arguments', 'run', 'record', 'play', 'info', 'format_info', 'import_msg_class',
-           'qos_to_rclpy', 'qos_from_rclpy']
+__all__ = ['add_arguments', 'run', 'record', 'play', 'info', 'recover', 'format_info',
+           'import_msg_class', 'qos_to_rclpy', 'qos_from_rclpy']

@@ -27,18 +27,37 @@ standard rosbag2 v9 directories that ``ros2 bag play``, RViz and Foxglove open o
   looks complete.
 * ``BagReader`` turns the library's assorted exceptions for missing, corrupt or truncated files
   into one ``BagError`` that names the file.
+* Integrity: MCAP chunks carry their CRC32 and the footer the summary CRC (rosbags writes 0,
+  "not checked"); sqlite3 bags get a table ``mv3dpose_crc32`` with one key per message
+  (CRC32 of the data, topic and timestamp), which ros2 bag ignores. Readers verify both, so a
+  corrupted payload is a ``BagError`` naming the file and the chunk (MCAP) or the message
+  (sqlite3) instead of wrong values. Bags without CRCs (other writers) are read unchecked.
+* Crash safety: ``BagWriter.checkpoint`` closes the pending MCAP chunk and flushes it (sqlite3:
+  commits), so a writer killed with SIGKILL leaves a partial file in which everything up to the
+  last checkpoint is intact; ``salvage`` turns such a ``.NAME.partial-PID`` directory into a
+  complete bag (``mv3dpose bag recover``).
 """
 
+from binascii import crc32
 import functools
 import os
 from pathlib import Path
+import re
 import shutil
-import tempfile
-from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Union
+import sqlite3
+import struct
+from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Tuple
+from typing import Union
 
+from mv3dpose_ros.core.files import load_yaml, LoadError, read_text
+from mv3dpose_ros.core.files import temp_path_beside as _temp_path_beside
+import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2.metadata import parse_qos
+from rosbags.rosbag2.storage_mcap import DECOMPRESSORS, McapWriter
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from rosbags.typesys import get_types_from_msg, Stores
 from rosbags.typesys import get_typestore as _rosbags_typestore
 
@@ -146,6 +165,116 @@ def _bag_error(path: Path, exc: BaseException) -> BagError:
                     f'{reason}')
 
 
+MCAP_MAGIC = b'\x89MCAP0\r\n'
+CRC_TABLE = 'mv3dpose_crc32'
+_U64 = struct.Struct('<Q')
+
+
+def _message_key(topic_id: int, timestamp: int, data: bytes) -> int:
+    """Return the signed 64-bit integrity key of one sqlite3 message row."""
+    mix = (int(timestamp) * 0x9E3779B1 + int(topic_id) * 0x85EBCA77) & 0xFFFFFFFF
+    key = (crc32(bytes(data)) << 32) | mix
+    return key - (1 << 64) if key >= 1 << 63 else key
+
+
+def _check_metadata(path: Path) -> None:
+    """Read ``metadata.yaml`` with the bounded loader before rosbags does (alias bombs)."""
+    meta = path / 'metadata.yaml'
+    try:
+        data = load_yaml(read_text(meta, 16 * 1024 * 1024))
+    except (OSError, LoadError) as exc:
+        raise BagError(f'{meta}: unreadable bag metadata: {exc}') from None
+    info = data.get('rosbag2_bagfile_information') if isinstance(data, dict) else None
+    files = info.get('relative_file_paths') if isinstance(info, dict) else None
+    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+        raise BagError(f'{meta}: no rosbag2_bagfile_information.relative_file_paths list')
+    for name in files:
+        inside = (path / name).resolve()
+        if path.resolve() not in inside.parents:
+            raise BagError(f'{meta}: relative_file_paths entry {name!r} leaves the bag folder')
+
+
+def _mcap_summary_crc(path: Path) -> None:
+    """Verify the footer's summary CRC of an MCAP file (when it has one)."""
+    size = path.stat().st_size
+    if size < len(MCAP_MAGIC) * 2 + 29:
+        raise BagError(f'{path}: truncated MCAP file ({size} bytes)')
+    with open(path, 'rb') as f:
+        f.seek(size - 8 - 29)
+        footer = f.read(29)
+        if footer[0] != 0x02 or f.read(8) != MCAP_MAGIC:
+            raise BagError(f'{path}: no MCAP footer (truncated or still being written; '
+                           'mv3dpose bag recover salvages interrupted recordings)')
+        start, _, crc = struct.unpack('<QQI', footer[9:])
+        if crc == 0:
+            return
+        if not 8 <= start <= size - 37:
+            raise BagError(f'{path}: MCAP footer points outside the file (summary at {start})')
+        f.seek(start)
+        summary = f.read(size - 12 - start)
+    if crc32(summary) != crc:
+        raise BagError(f'{path}: summary section (chunk index, statistics) fails its CRC: '
+                       'the file is corrupt')
+
+
+def _mcap_records(f, start: int, end: int) -> Iterator[Tuple[int, int, bytes]]:
+    """Yield ``(opcode, offset, body)`` of the records in ``[start, end)``; stop when short."""
+    pos = start
+    while pos + 9 <= end:
+        f.seek(pos)
+        head = f.read(9)
+        op, length = head[0], _U64.unpack_from(head, 1)[0]
+        if length > end - pos - 9:
+            return
+        yield op, pos, f.read(length)
+        pos += 9 + length
+
+
+def _chunk_records(body: bytes, path: Path, index: int, offset: int) -> bytes:
+    """Return the uncompressed records of an MCAP chunk record; BagError if corrupt."""
+    where = f'{path}: chunk {index} (at byte {offset})'
+    try:
+        _, _, usize, crc = struct.unpack_from('<QQQI', body, 0)
+        (n,) = struct.unpack_from('<I', body, 28)
+        compression = body[32:32 + n].decode()
+        (clen,) = _U64.unpack_from(body, 32 + n)
+        packed = body[40 + n:40 + n + clen]
+        if len(packed) != clen:
+            raise BagError(f'{where}: truncated')
+        raw = DECOMPRESSORS[compression](packed, usize)
+    except BagError:
+        raise
+    except Exception as exc:  # noqa: B902 - struct, unicode, lz4 and zstd errors
+        raise BagError(f'{where}: unreadable ({exc or type(exc).__name__})') from None
+    if len(raw) != usize:
+        raise BagError(f'{where}: {len(raw)} bytes, its header says {usize}')
+    if crc and crc32(raw) != crc:
+        raise BagError(f'{where}: CRC mismatch (stored {crc:08x}, computed '
+                       f'{crc32(raw):08x}): the bag is corrupt')
+    return raw
+
+
+def verify_mcap_chunks(path: PathLike) -> int:
+    """Check the CRC of every chunk of an MCAP file; return the count or raise BagError."""
+    path = Path(path)
+    count = 0
+    with open(path, 'rb') as f:
+        size = f.seek(0, 2)
+        for op, offset, body in _mcap_records(f, len(MCAP_MAGIC), size):
+            if op == 0x06:
+                _chunk_records(body, path, count, offset)
+                count += 1
+            elif op == 0x0F:   # DataEnd
+                break
+    return count
+
+
+def _storage_files(path: Path) -> List[Path]:
+    if path.is_dir():
+        return sorted(list(path.glob('*.mcap')) + list(path.glob('*.db3')))
+    return [path]
+
+
 class BagReader:
     """
     Read a rosbag2 directory (or a lone ``.mcap`` / ``.db3`` file).
@@ -161,11 +290,43 @@ class BagReader:
             raise BagError(f'{self.path}: no such bag (file or directory does not exist)')
         if self.path.is_dir() and not (self.path / 'metadata.yaml').exists():
             raise BagError(f'{self.path}: not a rosbag2 bag (no metadata.yaml in the directory)')
+        if self.path.is_dir():
+            _check_metadata(self.path)
+        for f in _storage_files(self.path):
+            if f.suffix == '.mcap' and f.exists():
+                _mcap_summary_crc(f)
         try:
             self._reader = Reader(self.path)
             self._reader.open()
         except Exception as exc:  # noqa: B902 - rosbags raises many types for bad files
             raise _bag_error(self.path, exc) from exc
+        self._keys = self._load_keys()
+
+    def _load_keys(self) -> Optional[np.ndarray]:
+        """Return the sorted integrity keys of a sqlite3 bag, or None if it has none."""
+        dbs = [f for f in _storage_files(self.path) if f.suffix == '.db3']
+        if not dbs:
+            return None
+        keys = []
+        try:
+            for db in dbs:
+                with sqlite3.connect(f'file:{db}?mode=ro', uri=True) as conn:
+                    if not conn.execute('SELECT 1 FROM sqlite_master WHERE name = ?',
+                                        (CRC_TABLE,)).fetchone():
+                        return None
+                    keys += [k for (k,) in conn.execute(f'SELECT key FROM {CRC_TABLE}')]
+        except sqlite3.Error as exc:
+            raise _bag_error(self.path, exc) from exc
+        if not all(isinstance(k, int) for k in keys):
+            raise BagError(f'{self.path}: table {CRC_TABLE} holds non-integer keys (corrupt)')
+        return np.sort(np.array(keys, dtype=np.int64))
+
+    def _check_key(self, conn, stamp: int, data: bytes) -> None:
+        key = _message_key(conn.id, stamp, data)
+        i = int(np.searchsorted(self._keys, key))
+        if i >= len(self._keys) or self._keys[i] != key:
+            raise BagError(f'{self.path}: message on {conn.topic} at {stamp} ns fails its '
+                           'CRC (data, topic or timestamp changed): the bag is corrupt')
 
     def __enter__(self) -> 'BagReader':
         """Return self."""
@@ -228,8 +389,17 @@ class BagReader:
         try:
             for conn, stamp, data in self._reader.messages(connections=conns, start=start_ns):
                 seen += 1
-                yield BagMessage(conn.topic, conn.msgtype, int(stamp), bytes(data))
+                stamp, data = int(stamp), bytes(data)
+                if self._keys is not None:
+                    self._check_key(conn, stamp, data)
+                yield BagMessage(conn.topic, conn.msgtype, stamp, data)
+        except BagError:
+            raise
         except Exception as exc:  # noqa: B902
+            if 'checksum' in str(exc).lower() or 'chunk' in str(exc).lower():
+                for f in _storage_files(self.path):   # name the chunk
+                    if f.suffix == '.mcap':
+                        verify_mcap_chunks(f)
             raise _bag_error(self.path, exc) from exc
         expected = sum(c.msgcount for c in conns)
         if start_ns is None and seen != expected:
@@ -256,11 +426,111 @@ def check_bag(path: PathLike) -> int:
 
 # ------------------------------------------------------------------------------------ writing
 
+class _CrcMcapWriter(McapWriter):
+    """rosbags' MCAP writer, plus chunk and summary CRCs and checkpoints."""
+
+    def close_chunk(self) -> None:
+        """Write the pending chunk and patch its uncompressed CRC into the record."""
+        crc = crc32(self.chunk.bio.getbuffer())
+        start = self.bio.tell()
+        super().close_chunk()
+        end = self.bio.tell()
+        self.bio.seek(start + 1 + 8 + 24)   # opcode, length, start/end time, size
+        self.bio.write(struct.pack('<I', crc))
+        self.bio.seek(end)
+
+    def checkpoint(self) -> None:
+        """Close the pending chunk and hand everything to the OS (survives SIGKILL)."""
+        if self.chunk.bio.tell():
+            self.close_chunk()
+        self.bio.flush()
+
+    def close(self, version: int, metadata: str) -> None:
+        """Finish the file, then fill in the footer's summary CRC."""
+        super().close(version, metadata)
+        with open(self.path, 'r+b') as f:
+            size = f.seek(0, 2)
+            f.seek(size - 8 - 29 + 9)
+            start = _U64.unpack(f.read(8))[0]
+            f.seek(start)
+            crc = crc32(f.read(size - 12 - start))
+            f.seek(size - 12)
+            f.write(struct.pack('<I', crc))
+
+
+class _CheckpointSqlite3Writer(Sqlite3Writer):
+    """rosbags' sqlite3 writer with checkpoints (commits)."""
+
+    def checkpoint(self) -> None:
+        """Commit what was written so far."""
+        self.conn.commit()
+
+
+class _Writer(Writer):
+    STORAGE_PLUGINS = {StoragePlugin.MCAP: _CrcMcapWriter,
+                       StoragePlugin.SQLITE3: _CheckpointSqlite3Writer}
+
+
+def _add_crc_table(db: Path) -> None:
+    """Add the integrity key of every message of a finished sqlite3 bag."""
+    with sqlite3.connect(db) as conn:
+        conn.create_function('mv3dpose_key', 3, _message_key, deterministic=True)
+        conn.execute(f'CREATE TABLE {CRC_TABLE} (key INTEGER NOT NULL)')
+        conn.execute(f'INSERT INTO {CRC_TABLE} SELECT mv3dpose_key(topic_id, timestamp, data) '
+                     'FROM messages')
+    conn.close()
+
+
+def is_bag(path: PathLike) -> bool:
+    """
+    Tell whether ``path`` is a rosbag2 bag this tool may replace.
+
+    A storage file (``.mcap``, ``.db3``), or a directory holding ``metadata.yaml`` and
+    otherwise only bag files (storage files, their journals, ``.yaml``), nothing nested.
+    """
+    p = Path(path)
+    if p.is_file():
+        return p.suffix in ('.mcap', '.db3')
+    if not p.is_dir() or not (p / 'metadata.yaml').is_file():
+        return False
+    allowed = re.compile(r'.*\.(mcap|db3|db3-journal|db3-wal|db3-shm|yaml|zstd|lz4)$')
+    return all(c.is_file() and allowed.match(c.name) for c in p.iterdir())
+
+
+def _check_replaceable(path: Path) -> None:
+    if path.exists() and not is_bag(path):
+        kind = 'directory' if path.is_dir() else 'file'
+        raise BagError(f'{path}: exists and is a {kind} that is not a rosbag2 bag; '
+                       '--overwrite replaces only bags, so nothing was written')
+
+
+def partial_dirs(path: PathLike) -> List[Path]:
+    """Return the ``.NAME.partial-PID`` directories of ``path`` left by dead writers."""
+    target = Path(path)
+    found = []
+    for d in sorted(target.parent.glob(f'.{target.name}.partial-*')):
+        pid = d.name.rsplit('-', 1)[-1]
+        if not pid.isdigit() or not d.is_dir():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            alive = int(pid) != os.getpid()
+        except ProcessLookupError:
+            alive = False
+        except PermissionError:
+            alive = True
+        if not alive:
+            found.append(d)
+    return found
+
+
 class BagWriter:
     """
     Write a rosbag2 bag atomically: into a hidden temp dir, renamed into place on success.
 
     Use as a context manager; an exception inside the ``with`` block discards the partial bag.
+    With ``overwrite`` an existing *bag* at ``path`` is replaced; anything else there is an
+    error (before anything is written).
     """
 
     def __init__(self, path: PathLike, storage: str = DEFAULT_STORAGE, overwrite: bool = False):
@@ -272,14 +542,15 @@ class BagWriter:
         self.overwrite = overwrite
         if self.path.exists() and not overwrite:
             raise BagError(f'{self.path}: exists already; choose another output or remove it')
+        _check_replaceable(self.path)
         parent = self.path.parent
         if not parent.is_dir():
             raise BagError(f'{self.path}: output folder {parent} does not exist')
         self._tmp_root = parent / f'.{self.path.name}.partial-{os.getpid()}'
         shutil.rmtree(self._tmp_root, ignore_errors=True)
         self._tmp_root.mkdir()
-        self._writer = Writer(self._tmp_root / self.path.name, version=9,
-                              storage_plugin=_PLUGINS[storage])
+        self._writer = _Writer(self._tmp_root / self.path.name, version=9,
+                               storage_plugin=_PLUGINS[storage])
         self._writer.open()
         self._conns: Dict[str, Any] = {}
         self.counts: Dict[str, int] = {}
@@ -328,15 +599,23 @@ class BagWriter:
         self.add_topic(topic, msgtype, qos)
         self.write(topic, timestamp_ns, serialize(msg, msgtype))
 
+    def checkpoint(self) -> None:
+        """Make everything written so far survive a SIGKILL (see ``salvage``)."""
+        if not self._closed and self._writer.storage is not None:
+            self._writer.storage.checkpoint()
+
     def close(self) -> Path:
         """Finish the bag and move it into place; return its path."""
         if self._closed:
             return self.path
         try:
             self._writer.close()
+            for db in (self._tmp_root / self.path.name).glob('*.db3'):
+                _add_crc_table(db)
             if self.path.exists():
                 if not self.overwrite:
                     raise BagError(f'{self.path}: appeared while writing; not overwriting it')
+                _check_replaceable(self.path)
                 if self.path.is_dir():
                     shutil.rmtree(self.path)
                 else:
@@ -374,19 +653,138 @@ def bag_path_type(path: PathLike) -> str:
 
 
 def temp_path_beside(output: PathLike) -> str:
-    """
-    Create an empty hidden temp file beside ``output`` (same folder, same suffix).
+    """``core.files.temp_path_beside`` with a missing output folder as ``BagError``."""
+    try:
+        return _temp_path_beside(output)
+    except FileNotFoundError as exc:
+        raise BagError(str(exc)) from None
 
-    Writers fill it and ``os.replace`` it onto ``output`` when done, so a crash never leaves a
-    half-written file under the final name. Permissions follow the umask like ``open``.
+
+# ------------------------------------------------------------------------------------ salvage
+
+class SalvageReport(NamedTuple):
+    """What ``salvage`` recovered."""
+
+    output: Path
+    messages: int
+    topics: Dict[str, int]
+    lost_tail_bytes: int     # bytes after the last intact chunk (MCAP), 0 for sqlite3
+    note: str
+
+
+def _read_str(buf: bytes, pos: int) -> Tuple[str, int]:
+    (n,) = struct.unpack_from('<I', buf, pos)
+    return buf[pos + 4:pos + 4 + n].decode(), pos + 4 + n
+
+
+def _mcap_items(path: Path) -> Tuple[list, int, int]:
+    """Return ``(items, intact_end, size)`` of a partial MCAP: schema/channel/message tuples."""
+    items = []
+    with open(path, 'rb') as f:
+        if f.read(8) != MCAP_MAGIC:
+            raise BagError(f'{path}: not an MCAP file (bad magic)')
+        size = f.seek(0, 2)
+        end = len(MCAP_MAGIC)
+        index = 0
+
+        def parse(op: int, body: bytes) -> None:
+            if op == 0x03:
+                (sid,) = struct.unpack_from('<H', body, 0)
+                name, _ = _read_str(body, 2)
+                items.append(('schema', sid, name))
+            elif op == 0x04:
+                cid, sid = struct.unpack_from('<HH', body, 0)
+                topic, pos = _read_str(body, 4)
+                _, pos = _read_str(body, pos)            # message encoding
+                (mlen,) = struct.unpack_from('<I', body, pos)
+                meta, qos, mpos = body[pos + 4:pos + 4 + mlen], [], 0
+                while mpos < len(meta):
+                    key, mpos = _read_str(meta, mpos)
+                    value, mpos = _read_str(meta, mpos)
+                    if key == 'offered_qos_profiles':
+                        qos = parse_qos(value)
+                items.append(('channel', cid, (sid, topic, qos)))
+            elif op == 0x05:
+                cid, _, stamp = struct.unpack_from('<HIQ', body, 0)
+                items.append(('message', cid, (stamp, body[22:])))
+
+        for op, offset, body in _mcap_records(f, len(MCAP_MAGIC), size):
+            try:
+                if op == 0x06:
+                    raw = _chunk_records(body, path, index, offset)
+                    index += 1
+                    pos = 0
+                    while pos + 9 <= len(raw):
+                        iop, ilen = raw[pos], _U64.unpack_from(raw, pos + 1)[0]
+                        parse(iop, raw[pos + 9:pos + 9 + ilen])
+                        pos += 9 + ilen
+                elif op in (0x03, 0x04, 0x05):
+                    parse(op, body)
+                elif op == 0x0F:
+                    end = offset + 9 + len(body)
+                    break
+            except (BagError, struct.error, UnicodeDecodeError):
+                break            # corrupt from here on: keep what came before
+            end = offset + 9 + len(body)
+    return items, end, size
+
+
+def salvage(source: PathLike, output: PathLike, overwrite: bool = False) -> SalvageReport:
     """
-    out = Path(output)
-    if not out.parent.is_dir():
-        raise BagError(f'{output}: output folder {out.parent} does not exist')
-    fd, tmp = tempfile.mkstemp(prefix=f'.{out.stem}.', suffix=f'.partial{out.suffix}',
-                               dir=out.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    return tmp
+    Write the intact messages of an interrupted recording into a new, complete bag.
+
+    ``source`` is a ``.NAME.partial-PID`` directory (or the storage file inside it) left by
+    a writer that was killed. MCAP: every chunk whose CRC checks is kept; the incomplete tail
+    (at most what came after the writer's last checkpoint) is lost. sqlite3: every committed
+    row is kept. The bag is written atomically at ``output`` (same storage as the source).
+    """
+    src = Path(source)
+    files = [f for f in (src.rglob('*') if src.is_dir() else [src])
+             if f.suffix in ('.mcap', '.db3')]
+    if len(files) != 1:
+        raise BagError(f'{src}: expected one .mcap or .db3 file to salvage, found '
+                       f'{len(files)}')
+    store = files[0]
+    topics: Dict[int, Tuple[str, str, list]] = {}
+    messages: List[Tuple[int, int, bytes]] = []
+    lost = 0
+    if store.suffix == '.mcap':
+        items, end, size = _mcap_items(store)
+        schemas = {}
+        for kind, key, value in items:
+            if kind == 'schema':
+                schemas[key] = value
+            elif kind == 'channel':
+                sid, topic, qos = value
+                topics[key] = (topic, schemas.get(sid, ''), qos)
+            elif key in topics:
+                messages.append((key, value[0], value[1]))
+        lost = size - end
+        storage = 'mcap'
+    else:
+        try:
+            with sqlite3.connect(store) as conn:
+                for tid, name, msgtype, qos in conn.execute(
+                        'SELECT id, name, type, offered_qos_profiles FROM topics'):
+                    topics[tid] = (name, msgtype, parse_qos(qos) if qos else [])
+                messages = [(t, int(s), bytes(d)) for t, s, d in conn.execute(
+                    'SELECT topic_id, timestamp, data FROM messages ORDER BY id')
+                    if t in topics]
+            conn.close()
+        except (sqlite3.Error, ValueError, TypeError) as exc:
+            raise BagError(f'{store}: cannot read the partial sqlite3 bag: {exc}') from None
+        storage = 'sqlite3'
+    counts: Dict[str, int] = {}
+    with BagWriter(output, storage=storage, overwrite=overwrite) as writer:
+        for tid, (topic, msgtype, qos) in topics.items():
+            try:
+                writer.add_topic(topic, msgtype, qos)
+            except (BagError, ValueError) as exc:
+                raise BagError(f'{store}: topic {topic}: {exc}') from None
+            counts[topic] = 0
+        for tid, stamp, data in sorted(messages, key=lambda m: m[1]):
+            writer.write(topics[tid][0], stamp, data)
+            counts[topics[tid][0]] += 1
+    note = (f'{lost} bytes after the last intact chunk were lost' if lost
+            else 'nothing was lost after the last checkpoint')
+    return SalvageReport(Path(output), len(messages), counts, lost, note)
