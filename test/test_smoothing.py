@@ -12,66 +12,175 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Causal alpha-beta filter and offline Gaussian smoothing with gap interpolation."""
+"""Per-joint Kalman filters, fixed-lag smoothing, offline Gaussian smoothing with gaps."""
 
-from mv3dpose_ros.core.smoothing import (CausalFilter, gaussian_smooth, interpolate_gaps,
-                                         smooth_track_sequence)
+import dataclasses
+
+from mv3dpose_ros.core.smoothing import (FixedLagSmoother, gaussian_smooth, interpolate_gaps,
+                                         JointKalman, smooth_track_sequence)
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 import numpy as np
 import pytest
 
+R = 0.01 ** 2          # measurement variance per axis [m^2] (1 cm)
 
-def test_causal_filter_has_no_lag_on_constant_velocity():
-    f = CausalFilter(2, alpha=0.5, beta=0.2)
-    for i in range(60):
+
+def _update(f, z, stamp, r=R):
+    z = np.asarray(z, dtype=float).reshape(len(f), -1, 3)
+    return f.update(z, np.full(z.shape[:2], r), stamp)
+
+
+def test_kalman_tracks_constant_velocity_without_lag():
+    f = JointKalman(2, accel_noise=1.0, rows=1)
+    for i in range(90):
         t = i / 30.0
         z = np.array([[1.2 * t, 0.0, 1.0], [0.0, -0.5 * t, 0.3]])
-        x, state = f.update(z, t)
-    assert np.allclose(x, z, atol=1e-9)                  # exact after convergence
-    assert (state == JointState.TRIANGULATED).all()
-    assert np.allclose(f.v[0], [[1.2, 0, 0], [0, -0.5, 0]], atol=1e-6)
+        out = _update(f, z, t)
+    assert np.allclose(out.joints[0], z, atol=2e-3)
+    assert (out.state == JointState.TRIANGULATED).all() and out.accepted.all()
+    assert np.allclose(f.v[0], [[1.2, 0, 0], [0, -0.5, 0]], atol=0.02)
+    assert (out.variance < R).all()                   # filtered beats one measurement
 
 
-def test_causal_filter_reduces_noise_on_a_still_joint():
+def test_kalman_velocity_starts_at_zero_not_from_two_noisy_samples():
+    f = JointKalman(1, rows=1)
+    _update(f, [0.0, 0.0, 0.0], 0.0)
+    assert np.allclose(f.v, 0.0)
+    _update(f, [0.02, 0.0, 0.0], 1 / 30)              # 2 cm in 1/30 s: 0.6 m/s if raw
+    assert 0 < f.v[0, 0, 0] < 0.9 * 0.6                # shrunk towards the zero start
+    assert f.p_vv[0, 0] < 1.0                          # and known better than before
+
+
+def test_kalman_reduces_noise_on_a_still_joint():
     rng = np.random.default_rng(0)
-    f = CausalFilter(1, alpha=0.4, beta=0.1)
-    out = []
-    for i in range(400):
-        x, _ = f.update(rng.normal(0, 0.01, (1, 3)), i / 30.0)
-        out.append(x[0])
-    assert np.std(np.array(out)[100:]) < 0.75 * 0.01
+    f = JointKalman(1, accel_noise=0.01, rows=1)
+    out = [_update(f, rng.normal(0, 0.01, 3), i / 30.0).joints[0, 0] for i in range(300)]
+    assert np.std(np.array(out)[50:]) < 0.5 * 0.01
 
 
-def test_causal_filter_fills_short_gaps_then_forgets():
-    f = CausalFilter(1, max_gap_s=0.1)
+def test_kalman_rejects_a_single_frame_outlier():
+    f = JointKalman(1, rows=1)
     for i in range(10):
-        f.update(np.array([[0.1 * i, 0.0, 0.0]]), i * 0.05)   # 2 m/s
-    x, state = f.update(np.full((1, 3), np.nan), 0.5)
-    assert state[0] == JointState.PREDICTED and x[0, 0] == pytest.approx(1.0, abs=1e-6)
-    x, state = f.update(np.full((1, 3), np.nan), 0.55)
-    assert state[0] == JointState.PREDICTED
-    x, state = f.update(np.full((1, 3), np.nan), 0.6)         # 0.15 s since last seen
-    assert state[0] == JointState.MISSING and np.isnan(x).all()
-    x, state = f.update(np.array([[3.0, 0.0, 0.0]]), 0.65)   # restarts from the observation
-    assert state[0] == JointState.TRIANGULATED and x[0, 0] == 3.0
+        _update(f, [0.0, 0.0, 1.0], i / 30)
+    out = _update(f, [0.5, 0.0, 1.0], 10 / 30)        # one 0.5 m outlier
+    assert not out.accepted[0, 0] and out.state[0, 0] == JointState.PREDICTED
+    assert np.allclose(out.joints[0, 0], [0, 0, 1], atol=1e-6)   # not dragged towards it
+    out = _update(f, [0.0, 0.0, 1.0], 11 / 30)
+    assert out.accepted[0, 0] and abs(out.joints[0, 0, 0]) < 1e-3
 
 
-def test_causal_filter_restarts_on_a_jump():
-    f = CausalFilter(1, reset_m=0.5)
-    for i in range(5):
-        f.update(np.zeros((1, 3)), i * 0.1)
-    x, _ = f.update(np.array([[2.0, 0.0, 0.0]]), 0.5)
-    assert x[0, 0] == 2.0 and np.allclose(f.v, 0.0)
+def test_kalman_restarts_after_repeated_rejections():
+    f = JointKalman(1, reinit_after=2, rows=1)
+    for i in range(10):
+        _update(f, [0.0, 0.0, 1.0], i / 30)
+    assert not _update(f, [1.0, 0.0, 1.0], 10 / 30).accepted[0, 0]
+    out = _update(f, [1.0, 0.0, 1.0], 11 / 30)        # second time: the joint really moved
+    assert out.accepted[0, 0] and out.joints[0, 0, 0] == 1.0 and np.allclose(f.v, 0.0)
 
 
-def test_causal_filter_rows_follow_reindex():
-    f = CausalFilter(1, rows=0)
+def test_kalman_holds_joints_in_gaps_with_growing_variance_then_forgets():
+    f = JointKalman(1, max_gap_s=0.1, rows=1)
+    for i in range(10):
+        _update(f, [0.1 * i, 0.0, 0.0], i * 0.05)     # 2 m/s
+    last = f.x[0, 0, 0]
+    var = []
+    for stamp in (0.5, 0.55):
+        out = _update(f, [np.nan] * 3, stamp)
+        assert out.state[0, 0] == JointState.PREDICTED
+        assert out.joints[0, 0, 0] == last            # held, not extrapolated
+        var.append(out.variance[0, 0])
+    assert var[1] > var[0] > f.p_xx[0, 0]
+    out = _update(f, [np.nan] * 3, 0.6)                # 0.15 s since the last update
+    assert out.state[0, 0] == JointState.MISSING and np.isnan(out.joints).all()
+    assert np.isnan(out.variance).all()
+    out = _update(f, [3.0, 0.0, 0.0], 0.65)            # restarts from the observation
+    assert out.state[0, 0] == JointState.TRIANGULATED and out.joints[0, 0, 0] == 3.0
+
+
+def test_kalman_rows_follow_reindex():
+    f = JointKalman(1)
     f.reindex(np.array([-1, -1]))
-    f.update(np.array([[[1.0, 0, 0]], [[5.0, 0, 0]]]), 0.0)
-    f.reindex(np.array([1, -1]))                              # row 0 continues old row 1
-    x, state = f.update(np.array([[[5.0, 0, 0]], [[9.0, 0, 0]]]), 0.1)
+    f.update(np.array([[[1.0, 0, 0]], [[5.0, 0, 0]]]), np.full((2, 1), R), 0.0)
+    f.reindex(np.array([1, -1]))                        # row 0 continues old row 1
+    out = f.update(np.array([[[5.0, 0, 0]], [[9.0, 0, 0]]]), np.full((2, 1), R), 0.1)
     assert f.count[:, 0].tolist() == [2, 1]
-    assert x[:, 0, 0].tolist() == [5.0, 9.0]
+    assert out.joints[:, 0, 0].tolist() == [5.0, 9.0]
+
+
+def _live(tid, z, stamp, r=R, state=TrackState.CONFIRMED):
+    """Return a published track whose filter accepted ``z [J, 3]`` (NaN: none)."""
+    z = np.asarray(z, dtype=float)
+    n = len(z)
+    ok = np.isfinite(z[:, 0])
+    js = np.where(ok, JointState.TRIANGULATED, JointState.MISSING).astype(np.uint8)
+    return Track(track_id=tid, state=state, joints=z.copy(), confidence=np.where(ok, 0.8, 0),
+                 joint_state=js, num_views=np.full(n, 2, np.uint8),
+                 reprojection_error=np.zeros(n), position=np.full(3, np.nan),
+                 velocity=np.full(3, np.nan), first_seen=0.0, last_observed=stamp,
+                 joint_variance=np.where(ok, r, np.nan), measurement=z.copy(),
+                 measurement_variance=np.where(ok, r, np.nan))
+
+
+def test_fixed_lag_emits_each_set_lag_sets_later_with_its_own_key_and_stamp():
+    sm = FixedLagSmoother(lag=3)
+    out = []
+    for k in range(10):
+        done = sm.push(k, k / 25, [_live(1, [[0.1 * k, 0, 1]], k / 25)])
+        assert (done is None) == (k < 3)
+        if done is not None:
+            out.append(done)
+    assert [d[0] for d in out] == list(range(7))
+    tail = sm.flush()
+    assert [d[0] for d in tail] == [7, 8, 9] and sm.flush() == []
+    for key, stamp, tracks in out + tail:
+        assert stamp == key / 25 and [t.track_id for t in tracks] == [1]
+        assert tracks[0].joints[0] == pytest.approx([0.1 * key, 0, 1])   # a line stays one
+
+
+def test_fixed_lag_zero_passes_sets_through():
+    sm = FixedLagSmoother(lag=0)
+    tracks = [_live(1, [[0, 0, 1]], 0.0)]
+    key, stamp, out = sm.push('a', 0.0, tracks)
+    assert key == 'a' and out[0] is tracks[0]
+
+
+def test_fixed_lag_reduces_noise_below_the_causal_filter():
+    rng = np.random.default_rng(3)
+    truth = np.array([[0.8 * k / 25, 0.0, 1.0] for k in range(200)])
+    z = truth + rng.normal(0, 0.02, truth.shape)
+    kf = JointKalman(1, rows=1)
+    sm = FixedLagSmoother(lag=3)
+    causal, smooth = {}, {}
+    for k in range(200):
+        out = _update(kf, z[k], k / 25, 0.02 ** 2)
+        causal[k] = out.joints[0, 0]
+        tr = _live(1, [z[k]], k / 25, 0.02 ** 2)
+        done = sm.push(k, k / 25, [dataclasses.replace(tr, joints=out.joints[0])])
+        if done is not None:
+            smooth[done[0]] = done[2][0].joints[0]
+    keys = range(20, 190)
+    err_c = np.mean([np.linalg.norm(causal[k] - truth[k]) for k in keys])
+    err_s = np.mean([np.linalg.norm(smooth[k] - truth[k]) for k in keys])
+    err_z = np.mean([np.linalg.norm(z[k] - truth[k]) for k in keys])
+    assert err_s < 0.8 * err_c < err_z
+
+
+def test_fixed_lag_interpolates_a_gap_seen_on_both_sides():
+    sm = FixedLagSmoother(lag=2)
+    got = {}
+    for k in range(8):
+        z = [[0.1 * k, 0, 1], [np.nan] * 3 if k == 4 else [0.1 * k, 0.2, 1]]
+        tr = _live(5, z, k / 25)
+        if k == 4:                                   # the live output held joint 1
+            tr.joints[1] = [0.3, 0.2, 1]
+            tr.joint_state[1] = JointState.PREDICTED
+        done = sm.push(k, k / 25, [tr])
+        if done:
+            got[done[0]] = done[2][0]
+    assert got[4].joint_state.tolist() == [JointState.TRIANGULATED, JointState.PREDICTED]
+    assert got[4].joints[1] == pytest.approx([0.4, 0.2, 1.0])
+    deleted = _live(5, [[0, 0, 1], [0, 0, 1]], 0.0, state=TrackState.DELETED)
+    assert sm.push(8, 8 / 25, [deleted]) is not None and sm.flush()[-1][2][0] is deleted
 
 
 def test_interpolate_gaps():

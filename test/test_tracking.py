@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Tracker: gated matching, life cycle, ids, prediction, ground-plane fallback."""
+"""Tracker: gated matching, life cycle, ids, filtered motion, ground-plane fallback."""
 
 from mv3dpose_ros.core.tracking import pose_distance, Tracker, TrackerConfig
 from mv3dpose_ros.core.types import TrackState
@@ -123,13 +123,56 @@ def test_two_people_crossing_keep_their_ids():
 @pytest.mark.parametrize('predict', [True, False])
 def test_constant_velocity_prediction_bridges_dropped_frames(predict):
     cfg = TrackerConfig(confirm_hits=1, predict=predict, gate_growth_mps=0.0,
-                        recovery_gate_m=0.0, velocity_smoothing=0.0)
+                        recovery_gate_m=0.0)
     tr = Tracker(J, cfg)
-    tr.update(_pose(0.0, 0)[None], 0.0)
-    tr.update(_pose(0.15, 0)[None], 0.1)             # walking at 1.5 m/s
-    assert tr.tracks.velocity[0, 0] == pytest.approx(1.5)
-    tr.update(_pose(0.9, 0)[None], 0.6)              # five frames lost: 0.75 m further
+    for i in range(10):                              # walking at 1.5 m/s
+        tr.update(_pose(0.15 * i, 0)[None], 0.1 * i)
+    assert tr.tracks.velocity[0] == pytest.approx([1.5, 0, 0], abs=0.05)
+    tr.update(_pose(2.1, 0)[None], 1.4)              # four frames lost: 0.75 m further
     assert tr.tracks.ids.tolist() == ([1] if predict else [1, 2])
+
+
+def test_body_velocity_comes_from_the_filtered_state():
+    # One pose that mixes two people jumps 0.45 m: it may keep the track (recovery gate),
+    # but neither the track's pose nor its velocity may follow it.
+    tr = Tracker(J, TrackerConfig(confirm_hits=1, recovery_gate_m=0.5))
+    for i in range(10):
+        tr.update(_pose(0, 0)[None], i / 25)
+    upd = tr.update(_pose(0.45, 0)[None], 10 / 25)
+    assert tr.tracks.ids.tolist() == [1] and upd.detection.tolist() == [0]
+    assert not upd.filtered.accepted.any()           # every joint failed its innovation gate
+    assert np.abs(tr.tracks.velocity[0]).max() < 0.05
+    assert np.abs(tr.tracks.pose[0, :, 0] - _pose(0, 0)[:, 0]).max() < 0.01
+    upd = tr.update(_pose(0, 0)[None], 11 / 25)      # the person is where they were
+    assert upd.detection.tolist() == [0] and upd.filtered.accepted.all()
+
+
+def test_tracks_are_deleted_after_max_coast_s_whatever_the_gate_does():
+    # The gate widens with the time a track is unseen; before, a track unseen for 5 s (or an
+    # hour) still matched a pose there and its id went on.
+    for gap in (1.5, 5.0, 3600.0):
+        tr = Tracker(J, TrackerConfig(confirm_hits=1, max_coast_s=1.0, gate_growth_mps=1.0))
+        tr.update(_pose(0, 0)[None], 0.0)
+        upd = tr.update(_pose(0.1, 0)[None], gap)
+        assert upd.deleted.ids.tolist() == [1], gap
+        assert tr.tracks.ids.tolist() == [2] and upd.previous.tolist() == [-1]
+
+
+def test_well_supported_births_are_confirmed_at_once():
+    tr = Tracker(J, TrackerConfig(confirm_hits=3))
+    upd = tr.update(np.stack([_pose(0, 0), _pose(2, 0)]), 0.0,
+                    confirm_at_birth=lambda rows: rows == 1)
+    assert _states(tr) == {1: 'TENTATIVE', 2: 'CONFIRMED'}
+    assert upd.filtered.state.shape == (2, J)
+
+
+def test_stamps_are_kept_in_integer_nanoseconds():
+    tr = Tracker(J)
+    stamp_ns = 1_700_000_000_123_456_789             # not representable as float seconds
+    tr.update(_pose(0, 0)[None], stamp_ns / 1e9, stamp_ns=stamp_ns)
+    assert tr.tracks.first_seen_ns.tolist() == [stamp_ns]
+    tr.update(_pose(0, 0)[None], (stamp_ns + 40_000_001) / 1e9, stamp_ns=stamp_ns + 40_000_001)
+    assert tr.tracks.last_observed_ns.tolist() == [stamp_ns + 40_000_001]
 
 
 def test_birth_rules():

@@ -19,17 +19,23 @@
 Input: a calibration file (any format ``core.calibration`` reads) and a folder ``ROOT`` with
 one sub-folder of OpenPose JSON files per camera, named like the camera (loosely: Pose2Sim's
 ``cam01_json`` is camera ``cam_01``). Frames are matched across cameras by the number in the
-file names; frame ``n`` gets the stamp ``n / fps`` seconds. Every frame goes through
-``Fusion.step``, the very code the live ``fusion_node`` runs; with ``--smooth causal`` both give
-the same tracks for the same inputs. ``--smooth offline`` (the default for this batch command,
+file names; frame ``n`` gets the stamp ``n / fps`` seconds (``round(n * 1e9 / fps)`` ns).
+Every frame goes through ``Fusion.step``, the very code the live ``fusion_node`` runs, and the
+live publication rules (``core.output.TrackPublisher``): ``--smooth causal`` writes exactly what
+``fusion_node`` publishes on ``~/tracks``, and ``--smooth fixed-lag --lag-frames L`` exactly
+what it publishes on ``~/tracks_smoothed`` with ``smoothed_lag_frames: L``
+(``core.smoothing.FixedLagSmoother``; each frame is written with its own number and stamp,
+and the last L frames, which the node publishes only when it stops, are flushed at the end).
+``--smooth none`` writes every track ``Fusion.step`` keeps (internal ids, tentative ones too)
+with the accepted raw triangulations. ``--smooth offline`` (the default for this batch command,
 as in the paper) runs fusion without the causal filter and then applies
 the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``)
 after settling the run with hindsight (``core.hindsight.settle_tracks``: fragments of one
 person linked into one id, tracks confirmed from their first frame, ghosts and predictions
 after a person's last observation dropped).
 
-Output: JSON Lines, one line per frame (``io.tracks_jsonl``), including tentative tracks and
-one DELETED tombstone per ended track; consumers pick the states they want.
+Output: JSON Lines, one line per frame (``io.tracks_jsonl``), with one DELETED tombstone per
+ended track; consumers pick the states they want.
 """
 
 import argparse
@@ -38,9 +44,10 @@ import logging
 import os
 import sys
 import time
-from typing import Iterator, List, Tuple
+from typing import Iterator, List, Optional, Tuple
 
 LOG = logging.getLogger('mv3dpose.track')
+SMOOTH_MODES = ('causal', 'fixed-lag', 'offline', 'none')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,10 +65,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="tracks JSON Lines file ('-' = standard output)")
     parser.add_argument('--fps', type=float, default=30.0,
                         help='frame rate: frame n has stamp n / fps seconds (default 30)')
-    parser.add_argument('--smooth', choices=('causal', 'offline', 'none'), default='offline',
+    parser.add_argument('--smooth', choices=SMOOTH_MODES, default='offline',
                         help="offline (default): the paper's Gaussian smoothing of whole "
                              'tracks and states settled with hindsight; causal: the live '
-                             'filter, output identical to fusion_node; none: raw triangulation')
+                             "output, identical to fusion_node's ~/tracks; fixed-lag: "
+                             'identical to its ~/tracks_smoothed (see --lag-frames); none: '
+                             'accepted raw triangulations of every track kept')
+    parser.add_argument('--lag-frames', type=int, default=3,
+                        help='lag of --smooth fixed-lag in frames (the smoothed_lag_frames '
+                             'of fusion_node; default 3)')
     parser.add_argument('--sigma-frames', type=float, default=2.0,
                         help='Gaussian sigma in frames for --smooth offline (paper: 2)')
     parser.add_argument('--max-gap-frames', type=int, default=10,
@@ -161,7 +173,11 @@ def _check_layout(seq, layout) -> None:
 
 def run_fusion(fusion, seq, fps: float, progress: bool = False
                ) -> Iterator[Tuple[int, float, list]]:
-    """Yield ``(frame, stamp, tracks)`` for every frame of ``seq`` through ``fusion.step``."""
+    """
+    Yield ``(frame, stamp, tracks)`` for every frame of ``seq`` through ``fusion.step``.
+
+    Frame ``n`` is stamped ``n / fps`` s, exactly ``round(n * 1e9 / fps)`` ns in the tracks.
+    """
     frames = seq.frames
     bar = None
     if progress:
@@ -170,12 +186,39 @@ def run_fusion(fusion, seq, fps: float, progress: bool = False
     try:
         for frame in frames:
             stamp = frame / fps
-            yield frame, stamp, fusion.step(seq.read(frame), stamp)
+            yield frame, stamp, fusion.step(seq.read(frame), stamp, round(frame * 1e9 / fps))
             if bar is not None:
                 bar.update(1)
     finally:
         if bar is not None:
             bar.close()
+
+
+def live_output(frames: Iterator[Tuple[int, float, list]], config, lag_frames: Optional[int],
+                root_joints) -> Iterator[Tuple[int, float, list]]:
+    """
+    Turn ``run_fusion`` output into what ``fusion_node`` publishes, frame for frame.
+
+    ``lag_frames`` None: ``~/tracks``; else ``~/tracks_smoothed`` with that lag (the frames
+    still held at the end are flushed).
+    """
+    from mv3dpose_ros.core.output import TrackPublisher
+    from mv3dpose_ros.core.smoothing import FixedLagSmoother
+
+    publisher = TrackPublisher(publish_coast_s=config.publish_coast_s)
+    smoother = None
+    if lag_frames is not None:
+        smoother = FixedLagSmoother(lag_frames, root_joints=root_joints)
+    for frame, stamp, tracks in frames:
+        published = publisher.publish(tracks, stamp)
+        if smoother is None:
+            yield frame, stamp, published
+            continue
+        done = smoother.push(frame, stamp, published)
+        if done is not None:
+            yield done
+    if smoother is not None:
+        yield from smoother.flush()
 
 
 def run(args) -> int:
@@ -196,10 +239,12 @@ def run(args) -> int:
     try:
         layout = get_layout(args.layout)
         params = load_fusion_params(args.params) if args.params else {}
-        if args.smooth == 'offline':
+        if args.lag_frames < 0:
+            raise ValueError(f'--lag-frames must be >= 0, got {args.lag_frames}')
+        if args.smooth in ('offline', 'none'):
             params['smoothing'] = 'none'
-        elif args.smooth in ('causal', 'none'):
-            params['smoothing'] = args.smooth
+        else:
+            params['smoothing'] = 'causal'      # also under fixed-lag, as in fusion_node
         config = FusionConfig(**params)
         cameras, seq, notes = open_inputs(args)
         fusion = Fusion(cameras, layout.name, config)
@@ -230,6 +275,13 @@ def run(args) -> int:
                 smoothed = [[t for t in f if t.state == TrackState.DELETED or t.valid.any()]
                             for f in smoothed]
                 frames = ((f, s, t) for (f, s, _), t in zip(done, smoothed))
+            elif args.smooth in ('causal', 'fixed-lag'):
+                lag = args.lag_frames if args.smooth == 'fixed-lag' else None
+                try:
+                    root = layout.root_joints
+                except ValueError:
+                    root = None
+                frames = live_output(frames, config, lag, root)
             for frame, stamp, tracks in frames:
                 writer.write(frame, tracks, stamp)
                 for t in tracks:

@@ -19,9 +19,15 @@ One ``Fusion.step`` per synchronised set of views runs the whole of Tanke & Gall
 normalise every keypoint once, associate poses across views with cameras taken in a
 wide-angle-first order (``core.association``), triangulate with a reprojection gate, undo
 single-view left/right swaps, reject implausible bones (``core.triangulation``), merge or
-suppress duplicate 3D candidates, track (``core.tracking``) and smooth causally
-(``core.smoothing``). The live node and the offline command both call it, so their results
-agree frame for frame.
+suppress duplicate 3D candidates, and track (``core.tracking``) with per-joint Kalman filters
+(``core.smoothing.JointKalman``) whose measurement variance comes from the geometry: the
+normalised pixel noise (``measurement_noise_norm``, raised by the joint's reprojection error)
+times its depth in the cameras that saw it, divided by their number. The live node and the
+offline command both call it, so their results agree frame for frame.
+
+A new track that is well supported (``confirm_at_birth_ratio`` of the layout's joints
+triangulated from at least min(3, cameras) views) is CONFIRMED from its first frame; others
+wait for ``confirm_hits`` observations.
 
 New tracks start only from candidates inside the rig's shared field of view (their centroid
 in the images of ``min_birth_cameras_in_view`` cameras) and detected by at least
@@ -43,7 +49,6 @@ from mv3dpose_ros.core.association import (associate_stacked, camera_order,
                                            epipolar_norm_coefficients)
 from mv3dpose_ros.core.camera import Camera, essential_matrices
 from mv3dpose_ros.core.skeleton import get_layout, Layout
-from mv3dpose_ros.core.smoothing import CausalFilter
 from mv3dpose_ros.core.tracking import centroid, pose_distance, Tracker, TrackerConfig, Tracks
 from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, dlt_basis,
                                              swap_pairs, swapped_views, triangulate_robust,
@@ -54,8 +59,11 @@ import numpy as np
 _LOG = logging.getLogger(__name__)
 
 SMOOTHING_MODES = ('causal', 'none')
+# Floor of a joint's measurement variance [m^2]: (5 mm)^2.
+_MIN_VARIANCE = 0.005 ** 2
 # Joint states as plain ints: comparing an array with an IntEnum member costs ~6x more.
 _MISSING, _PREDICTED = int(JointState.MISSING), int(JointState.PREDICTED)
+_TRIANGULATED = np.uint8(JointState.TRIANGULATED)
 _TRACK_STATES = {int(s): s for s in TrackState}
 
 
@@ -85,29 +93,39 @@ class FusionConfig:
     tracking_prediction: bool = True        # constant-velocity prediction of the root
     confirm_hits: int = 3                   # observations before a track is CONFIRMED
     max_coast_s: float = 1.0                # unobserved time before a track is DELETED
+    confirm_at_birth_ratio: float = 0.6     # a new track with this share of the layout's joints
+    #                                         triangulated from >= min(3, cameras) views is
+    #                                         CONFIRMED at once (> 1: never)
+    publish_coast_s: float = 0.1            # COASTING tracks are published this long, then
+    #                                         withheld until recovered or deleted
     min_birth_joints: int = 6               # triangulated joints to start a new track
     min_birth_cameras_in_view: int = 3      # cameras whose image must contain a new track's
     #                                         centroid (capped at cameras - 1): no tracks are
     #                                         started outside the rig's shared working volume
     min_birth_view_ratio: float = 0.5       # a new track's views / cameras that should see it
-    # causal smoothing
-    smoothing: str = 'causal'               # 'causal' (alpha-beta per joint) or 'none'
-    smoothing_alpha: float = 0.6            # position gain per update (1 = no smoothing)
-    smoothing_beta: float = 0.25            # velocity gain per update
-    max_gap_s: float = 0.3                  # joints are predicted for at most this long
-    smoothing_reset_m: float = 0.5          # jump that restarts a joint's filter
+    # per-joint Kalman filters (always run: the tracker's motion comes from them)
+    smoothing: str = 'causal'               # output 'causal' (filtered joints) or 'none'
+    #                                         (accepted raw triangulations, held in gaps)
+    measurement_noise_norm: float = 0.008   # 2D noise per view (px / focal) behind the 3D
+    #                                         measurement variance
+    reprojection_noise_gain: float = 1.0    # a joint's 2D noise^2 = measurement_noise_norm^2
+    #                                         + gain * (its mean reprojection error)^2
+    accel_noise: float = 2.0                # white acceleration noise density [m^2/s^3]
+    innovation_gate_chi2: float = 16.3      # reject an observation beyond this (3 dof, 99.9 %)
+    reinit_after: int = 2                   # consecutive rejections before a joint restarts
+    max_gap_s: float = 0.3                  # joints are held for at most this long
 
     def validate(self) -> None:
         """Raise ValueError naming the first out-of-range field."""
         positive = ('epipolar_threshold_norm', 'reprojection_gate_norm', 'tracking_gate_m',
-                    'smoothing_alpha', 'smoothing_reset_m')
+                    'measurement_noise_norm', 'accel_noise', 'innovation_gate_chi2')
         non_negative = ('min_joint_confidence', 'swap_ratio', 'merge_distance_m',
                         'min_birth_view_ratio', 'tracking_gate_growth_mps',
-                        'tracking_recovery_gate_m', 'max_coast_s', 'smoothing_beta',
-                        'max_gap_s')
+                        'tracking_recovery_gate_m', 'max_coast_s', 'max_gap_s',
+                        'confirm_at_birth_ratio', 'publish_coast_s', 'reprojection_noise_gain')
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
                         'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
-                        'min_birth_cameras_in_view')
+                        'min_birth_cameras_in_view', 'reinit_after')
         for name, value in asdict(self).items():
             if isinstance(value, bool) or name == 'smoothing':
                 continue
@@ -122,8 +140,6 @@ class FusionConfig:
         if self.min_views < 2:
             raise ValueError(f'FusionConfig.min_views must be >= 2 (triangulation needs two '
                              f'views), got {self.min_views}')
-        if self.smoothing_alpha > 1 or self.smoothing_beta > 1:
-            raise ValueError('FusionConfig.smoothing_alpha and smoothing_beta must be <= 1')
         if self.smoothing not in SMOOTHING_MODES:
             raise ValueError(f'FusionConfig.smoothing must be one of {SMOOTHING_MODES}, '
                              f'got {self.smoothing!r}')
@@ -174,8 +190,12 @@ class Fusion:
             recovery_gate_m=cfg.tracking_recovery_gate_m,
             min_shared_joints=cfg.min_shared_joints, predict=cfg.tracking_prediction,
             confirm_hits=cfg.confirm_hits, max_coast_s=cfg.max_coast_s,
-            min_birth_joints=cfg.min_birth_joints))
-        self._new_filter()
+            min_birth_joints=cfg.min_birth_joints, accel_noise=cfg.accel_noise,
+            gate_chi2=cfg.innovation_gate_chi2, reinit_after=cfg.reinit_after,
+            max_gap_s=cfg.max_gap_s))
+        self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
+        self._strong_views = min(3, num_c)
+        self._confirm_joints = cfg.confirm_at_birth_ratio * lay.num_joints
         self._last_stamp: Optional[float] = None
         self._warned: Set[str] = set()
         num_j = lay.num_joints
@@ -188,23 +208,16 @@ class Fusion:
         self._info: Dict[str, float] = {}
         self._info_tri: Optional[Triangulation] = None
 
-    def _new_filter(self) -> None:
-        cfg = self.config
-        self._filter = None
-        if cfg.smoothing == 'causal':
-            self._filter = CausalFilter(self.layout.num_joints, cfg.smoothing_alpha,
-                                        cfg.smoothing_beta, cfg.max_gap_s, cfg.smoothing_reset_m)
-
     # ------------------------------------------------------------------ public API
     def reset(self) -> List[Track]:
         """Clear all tracks and filters; return their DELETED tombstones (ids keep counting)."""
         dropped = self._tombstones(self.tracker.reset())
-        self._new_filter()
         self._confidence = np.zeros((0, self.layout.num_joints))
         self._last_stamp = None
         return dropped
 
-    def step(self, views: Mapping[str, np.ndarray], stamp: float) -> List[Track]:
+    def step(self, views: Mapping[str, np.ndarray], stamp: float,
+             stamp_ns: Optional[int] = None) -> List[Track]:
         """
         Fuse one synchronised set of views taken at ``stamp`` seconds into tracks.
 
@@ -214,8 +227,11 @@ class Fusion:
         the tracks deleted in this step, once, as DELETED tombstones. Bad views (unknown
         camera, wrong shape) are skipped with a logged warning naming them. A stamp earlier
         than the previous one resets the tracks first (their tombstones come with this step).
+        ``stamp_ns`` is the same stamp in integer nanoseconds (default: ``stamp`` rounded); the
+        tracks' ``first_seen_ns`` / ``last_observed_ns`` are copies of it, exactly.
         """
         stamp = float(stamp)
+        stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
         tombs: List[Track] = []
         if self._last_stamp is not None and stamp < self._last_stamp:
             self._warn('time', f'stamp went back from {self._last_stamp:.6f} s to {stamp:.6f} s:'
@@ -232,9 +248,36 @@ class Fusion:
             return (in_view >= self._birth_views) \
                 & (views >= self.config.min_birth_view_ratio * in_view)
 
-        upd = self.tracker.update(tri.joints, stamp, can_birth)
-        return self._outputs(upd.detection, upd.previous, tri, members, stamp) + tombs \
+        def strong(rows: np.ndarray) -> np.ndarray:
+            # confirmed at once: enough joints triangulated from min(3, cameras) views
+            well_seen = (tri.num_views[rows] >= self._strong_views).sum(axis=1)
+            return well_seen >= self._confirm_joints
+
+        variance = self.measurement_variance(tri)
+        upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns)
+        return self._outputs(upd, tri, members, variance, stamp) + tombs \
             + self._tombstones(upd.deleted)
+
+    def measurement_variance(self, tri: Triangulation) -> np.ndarray:
+        """
+        Return the ``[K, J]`` per-axis variance [m^2] of triangulated joints (NaN if none).
+
+        (noise^2 + gain * reprojection error^2) * mean depth^2 / views (normalised units): a
+        joint far from its cameras, seen by few of them or fitting them badly is uncertain.
+        """
+        if not len(tri.joints):
+            return np.zeros(tri.joints.shape[:2])
+        pts = np.concatenate((tri.joints, np.ones(tri.joints.shape[:2] + (1,))), axis=-1)
+        depth = pts @ self._depth_rows.T                                    # [K, J, C]
+        used = np.moveaxis(tri.used, 0, -1)                                 # [K, J, C]
+        n = tri.num_views
+        with np.errstate(invalid='ignore', divide='ignore'):
+            mean_depth = np.where(used, depth, 0.0).sum(axis=-1) / n
+            err = np.where(np.isfinite(tri.error), tri.error, 0.0)
+            var = (self.config.measurement_noise_norm ** 2
+                   + self.config.reprojection_noise_gain * err * err) \
+                * mean_depth * mean_depth / n
+        return np.where(np.isfinite(tri.joints[..., 0]), np.maximum(var, _MIN_VARIANCE), np.nan)
 
     @property
     def last_info(self) -> Dict[str, float]:
@@ -427,23 +470,32 @@ class Fusion:
         return members[alive], merged
 
     # ------------------------------------------------------------------ output
-    def _outputs(self, det: np.ndarray, previous: np.ndarray, tri: Triangulation,
-                 members: np.ndarray, stamp: float) -> List[Track]:
+    def _outputs(self, upd, tri: Triangulation, members: np.ndarray, variance: np.ndarray,
+                 stamp: float) -> List[Track]:
         """Build the Track of every live track (vectorised over tracks)."""
         cfg = self.config
+        det, previous, kal = upd.detection, upd.previous, upd.filtered
         tr: Tracks = self.tracker.tracks
         num_t, num_j = len(tr), self.layout.num_joints
         seen = det >= 0
         if seen.all():
             z, conf_obs = tri.joints.take(det, axis=0), tri.confidence.take(det, axis=0)
             num_views, err = tri.num_views.take(det, axis=0), tri.error_px.take(det, axis=0)
+            r = variance.take(det, axis=0)
         else:                            # row K of the padded arrays is "not observed"
             z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan))).take(det, axis=0)
             conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j)))).take(det, axis=0)
             num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int))
                                        ).take(det, axis=0)
             err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan))).take(det, axis=0)
-        observed = np.isfinite(z[..., 0])
+            r = np.concatenate((variance, np.full((1, num_j), np.nan))).take(det, axis=0)
+        accepted = kal.accepted
+        if not accepted.all():           # a rejected observation is not an observation
+            z = np.where(accepted[..., None], z, np.nan)
+            r = np.where(accepted, r, np.nan)
+            num_views = np.where(accepted, num_views, 0)
+            err = np.where(accepted, err, np.nan)
+        observed = accepted
         if observed.all():
             conf_last = conf_obs
         else:
@@ -452,30 +504,29 @@ class Fusion:
                                  if len(self._confidence) else 0.0, 0.0)
             conf_last = np.where(observed, conf_obs, conf_prev)
         self._confidence = conf_last
-        if self._filter is not None:
-            self._filter.reindex(previous)
-            joints, state = self._filter.update(z, stamp)
-        else:
-            pred = tr.predicted(stamp, cfg.tracking_prediction)
-            joints = np.where(seen[:, None, None], z, pred)
-            ok = np.isfinite(joints[..., 0])
-            state = np.where(observed, np.uint8(JointState.TRIANGULATED),
-                             np.where(ok, np.uint8(JointState.PREDICTED),
-                                      np.uint8(JointState.MISSING))).astype(np.uint8)
-            joints = np.where(ok[..., None], joints, np.nan)
+        state, joint_var = kal.state, kal.variance
+        if cfg.smoothing == 'causal':
+            joints = kal.joints
+        else:                            # accepted triangulations, held joints in gaps
+            joints = np.where(observed[..., None], z, kal.joints)
+            joint_var = np.where(observed, r, joint_var)
         missing = state == _MISSING
         confidence = np.where(missing, 0.0, np.where(state == _PREDICTED, 0.5, 1.0) * conf_last)
         velocity = tr.velocity
+        cov = np.full((num_t, 3, 3), np.nan)
         if self._root is None:
             position = np.full((num_t, 3), np.nan)
         else:
             # mean of the two root joints, written out (a two-element np.mean costs more)
             left, right = self._root
             position = (joints[:, left] + joints[:, right]) / 2
-            if self._filter is not None:
-                v = self._filter.v
-                root_ok = ~(missing[:, left] | missing[:, right])
-                velocity = np.where(root_ok[:, None], (v[:, left] + v[:, right]) / 2, velocity)
+            root_var = (joint_var[:, left] + joint_var[:, right]) / 4
+            cov = root_var[:, None, None] * np.eye(3)
+            filt = self.tracker.filter
+            v = filt.v
+            root_ok = (filt.count[:, left] >= 2) & (filt.count[:, right] >= 2) \
+                & ~(missing[:, left] | missing[:, right])
+            velocity = np.where(root_ok[:, None], (v[:, left] + v[:, right]) / 2, velocity)
         score = confidence.sum(axis=1) / num_j if num_j else np.zeros(num_t)     # = mean
         if cfg.max_coast_s > 0:
             fade = 1.0 - (stamp - tr.last_observed) / cfg.max_coast_s
@@ -489,11 +540,15 @@ class Fusion:
                                      tr.missed.tolist())
         first_seen, last_observed, score = (tr.first_seen.tolist(), tr.last_observed.tolist(),
                                             score.tolist())
+        first_ns, last_ns = tr.first_seen_ns.tolist(), tr.last_observed_ns.tolist()
         out = [Track(track_id=ids[i], state=_TRACK_STATES[states[i]], joints=joints[i],
                      confidence=confidence[i], joint_state=state[i], num_views=num_views[i],
                      reprojection_error=err[i], position=position[i], velocity=velocity[i],
                      first_seen=first_seen[i], last_observed=last_observed[i], age=hits[i],
-                     missed=missed[i], score=score[i], source_cameras=view_sets[i])
+                     missed=missed[i], score=score[i], source_cameras=view_sets[i],
+                     joint_variance=joint_var[i], position_covariance=cov[i],
+                     measurement=z[i], measurement_variance=r[i], first_seen_ns=first_ns[i],
+                     last_observed_ns=last_ns[i])
                for i in range(num_t)]
         out.sort(key=lambda t: t.track_id)
         return out
@@ -513,6 +568,8 @@ class Fusion:
                              velocity=np.full(3, np.nan),
                              first_seen=float(dead.first_seen[i]),
                              last_observed=float(dead.last_observed[i]),
+                             first_seen_ns=int(dead.first_seen_ns[i]),
+                             last_observed_ns=int(dead.last_observed_ns[i]),
                              age=int(dead.hits[i]), missed=int(dead.missed[i]), score=0.0,
                              source_cameras=()))
         return out

@@ -15,11 +15,13 @@
 """
 Temporal smoothing of joint trajectories (paper, step 4), live and offline.
 
-Live (``CausalFilter``): a per-joint constant-velocity alpha-beta filter. It uses only past
-observations, has no steady-state lag on constant-velocity motion (the velocity term removes
-the lag an exponential average would have), fills gaps of up to ``max_gap_s`` by prediction
-(those joints are marked PREDICTED) and restarts a joint whose observation jumps by more than
-``reset_m`` (a re-acquired or corrected joint is not dragged through space).
+Live (``JointKalman``): per-joint constant-velocity Kalman filters with measurement noise
+from the triangulation geometry, an innovation gate against single-frame outliers, velocities
+that start at zero, and joints held (not extrapolated) in gaps with growing variance. The
+tracker owns them (``core.tracking``), so track motion comes from the filtered state.
+
+Fixed lag (``FixedLagSmoother``): each set's tracks re-estimated from the accepted
+observations up to ``lag`` sets later, published that much later with their own stamps.
 
 Offline (``gaussian_smooth``, ``smooth_track_sequence``): the paper's Gaussian smoothing with
 sigma in frames. Gaps of up to ``max_gap_frames`` are first filled by linear interpolation,
@@ -37,90 +39,151 @@ from scipy.ndimage import gaussian_filter1d
 # Joint states as uint8 scalars (the dtype of the state arrays; enum members are slow in numpy).
 _MISSING, _TRIANGULATED, _PREDICTED = (np.uint8(s) for s in (
     JointState.MISSING, JointState.TRIANGULATED, JointState.PREDICTED))
+_XYZ = np.ones(3)          # sums over x, y, z as a product with ones (cheaper than .sum(-1))
 
 
-class CausalFilter:
+@dataclasses.dataclass
+class KalmanUpdate:
+    """Estimates of ``JointKalman.update`` at one stamp, ``[T, J]`` rows."""
+
+    joints: np.ndarray      # [T, J, 3] metres, NaN where MISSING (held in gaps)
+    state: np.ndarray       # [T, J] uint8 JointState: TRIANGULATED (updated now), PREDICTED
+    #                         (held), MISSING
+    variance: np.ndarray    # [T, J] per-axis position variance [m^2], NaN where MISSING
+    accepted: np.ndarray    # [T, J] bool, an observation updated the joint now
+
+
+class JointKalman:
     """
-    Per-joint alpha-beta filters of ``[T, J, D]`` positions (T tracks) over time.
+    Per-joint constant-velocity Kalman filters of ``[T, J, 3]`` positions (T tracks) over time.
 
-    All rows are updated together at each stamp; ``reindex`` follows the tracker when tracks
-    are born or deleted. A ``[J, D]`` input is treated as a single track.
+    Each joint has the state (position, velocity) per axis with one isotropic covariance
+    shared by the three axes (``p_xx``, ``p_xv``, ``p_vv`` in m^2, m^2/s, m^2/s^2), driven by
+    white acceleration noise of spectral density ``accel_noise`` (m^2/s^3). The measurement
+    variance of each joint comes with the observation (from the triangulation geometry).
+
+    - A joint starts at its first observation with velocity 0 (variance ``init_speed_mps``^2),
+      not from the difference of two noisy samples.
+    - An observation whose squared Mahalanobis innovation exceeds ``gate_chi2`` (chi-square, 3
+      degrees of freedom) is rejected as an outlier; after ``reinit_after`` consecutive
+      rejections the joint restarts at the observation (the person really moved).
+    - In a gap the joint is HELD at its last estimate (not extrapolated) with a variance that
+      grows with the time since its last update; after ``max_gap_s`` it is MISSING and
+      restarts at its next observation.
+
+    All rows are updated together; ``reindex`` follows the tracker when tracks are born or
+    deleted.
     """
 
-    def __init__(self, num_joints: int, alpha: float = 0.6, beta: float = 0.25,
-                 max_gap_s: float = 0.3, reset_m: float = 0.5, dims: int = 3,
+    def __init__(self, num_joints: int, accel_noise: float = 2.0, init_speed_mps: float = 1.0,
+                 gate_chi2: float = 16.3, reinit_after: int = 2, max_gap_s: float = 0.3,
                  rows: int = 0) -> None:
-        """Create the filter; ``alpha`` and ``beta`` in (0, 1], as per-update gains."""
-        if not (0 < alpha <= 1 and 0 <= beta <= 1):
-            raise ValueError(f'CausalFilter: need 0 < alpha <= 1 and 0 <= beta <= 1, '
-                             f'got alpha={alpha}, beta={beta}')
-        self.alpha, self.beta = float(alpha), float(beta)
-        self.max_gap_s, self.reset_m = float(max_gap_s), float(reset_m)
-        self._ones = np.ones(dims)          # sums over D as a product: cheaper than .sum(-1)
-        self.x = np.full((rows, num_joints, dims), np.nan)
-        self.v = np.zeros((rows, num_joints, dims))
-        self.count = np.zeros((rows, num_joints), dtype=int)   # observations since (re)start
-        self.last_seen = np.full((rows, num_joints), -np.inf)   # stamp of the last observation
-        self.stamp: Optional[float] = None
+        """Create the filters (``rows`` tracks of ``num_joints`` joints, all unknown)."""
+        if not (accel_noise > 0 and init_speed_mps >= 0 and gate_chi2 > 0
+                and reinit_after >= 1 and max_gap_s >= 0):
+            raise ValueError(f'JointKalman: need accel_noise > 0, init_speed_mps >= 0, '
+                             f'gate_chi2 > 0, reinit_after >= 1, max_gap_s >= 0; got '
+                             f'{accel_noise}, {init_speed_mps}, {gate_chi2}, {reinit_after}, '
+                             f'{max_gap_s}')
+        self.q, self.v0 = float(accel_noise), float(init_speed_mps) ** 2
+        self.gate, self.reinit_after = float(gate_chi2), int(reinit_after)
+        self.max_gap_s = float(max_gap_s)
+        self.num_joints = int(num_joints)
+        self._alloc(rows)
+
+    def _alloc(self, rows: int) -> None:
+        shape = (rows, self.num_joints)
+        self.x = np.full(shape + (3,), np.nan)
+        self.v = np.zeros(shape + (3,))
+        self.p_xx, self.p_xv, self.p_vv = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        self.t = np.full(shape, -np.inf)                 # stamp of the last update
+        self.count = np.zeros(shape, dtype=np.int64)     # updates since the (re)start, 0 = none
+        self.rejects = np.zeros(shape, dtype=np.int64)   # consecutive rejected observations
+
+    def __len__(self) -> int:
+        """Return the number of rows (tracks)."""
+        return len(self.x)
 
     def reindex(self, previous: np.ndarray) -> None:
         """Rearrange rows: new row ``i`` continues old row ``previous[i]`` (-1 = a new track)."""
-        previous = np.asarray(previous, dtype=int)
+        previous = np.asarray(previous, dtype=np.int64)
         if len(previous) == len(self.x) and previous.tolist() == list(range(len(previous))):
             return                                      # same tracks in the same rows
-        new = previous < 0
-        src = np.where(new, 0, previous)
-        if len(self.x) == 0:
-            shape = (len(previous),) + self.x.shape[1:]
-            self.x, self.v = np.full(shape, np.nan), np.zeros(shape)
-            self.count = np.zeros(shape[:2], dtype=int)
-            self.last_seen = np.full(shape[:2], -np.inf)
-            return
-        self.x = np.where(new[:, None, None], np.nan, self.x[src])
-        self.v = np.where(new[:, None, None], 0.0, self.v[src])
-        self.count = np.where(new[:, None], 0, self.count[src])
-        self.last_seen = np.where(new[:, None], -np.inf, self.last_seen[src])
+        old = (self.x, self.v, self.p_xx, self.p_xv, self.p_vv, self.t, self.count,
+               self.rejects)
+        self._alloc(len(previous))
+        keep = previous >= 0
+        if keep.any():
+            src, dst = previous[keep], np.nonzero(keep)[0]
+            for new, arr in zip((self.x, self.v, self.p_xx, self.p_xv, self.p_vv, self.t,
+                                 self.count, self.rejects), old):
+                new[dst] = arr[src]
 
-    def update(self, z: np.ndarray, stamp: float) -> Tuple[np.ndarray, np.ndarray]:
-        """
-        Fold in observations ``z [T, J, D]`` (NaN = not observed) taken at ``stamp`` seconds.
+    def predict_variance(self, stamp: float) -> np.ndarray:
+        """Return the ``[T, J]`` per-axis variance of each held joint at ``stamp``."""
+        dt = np.maximum(stamp - self.t, 0.0)
+        with np.errstate(invalid='ignore'):
+            var = self.p_xx + 2 * dt * self.p_xv + dt * dt * self.p_vv \
+                + self.q * dt * dt * dt / 3
+            # holding instead of moving adds the squared drift of the velocity estimate
+            speed2 = (self.v * self.v) @ _XYZ / 3
+            return var + speed2 * dt * dt
 
-        Returns the filtered positions (NaN where unknown) and the ``[T, J]`` uint8
-        JointState: TRIANGULATED (observed now), PREDICTED (gap filled) or MISSING.
+    def update(self, z: np.ndarray, r: np.ndarray, stamp: float) -> KalmanUpdate:
         """
-        single = z.ndim == 2
-        if single:
-            z = z[None]
-            if len(self.x) == 0:
-                self.reindex(np.array([-1]))
-        dt = 0.0 if self.stamp is None else max(stamp - self.stamp, 0.0)
-        self.stamp = stamp
-        obs = np.isfinite(z[..., 0])
-        live = self.count > 0
-        pred = self.x + self.v * dt
-        resid = z - pred
+        Fold in observations ``z [T, J, 3]`` (NaN = none) of variance ``r [T, J]`` (m^2/axis).
+
+        Returns the estimates at ``stamp``: positions (NaN where MISSING), JointState, per-axis
+        variance (NaN where MISSING) and which observations were accepted.
+        """
+        obs = np.isfinite(z[..., 0]) & np.isfinite(r)
+        dt = stamp - self.t                                       # inf for unknown joints
+        live = (self.count > 0) & (dt <= self.max_gap_s + 1e-9)
+        dt = np.where(live, np.maximum(dt, 0.0), 0.0)
+        q = self.q
+        pxx = self.p_xx + 2 * dt * self.p_xv + dt * dt * self.p_vv + q * dt * dt * dt / 3
+        pxv = self.p_xv + dt * self.p_vv + q * dt * dt / 2
+        pvv = self.p_vv + q * dt
+        xp = self.x + self.v * dt[..., None]
+        with np.errstate(invalid='ignore'):
+            resid = z - xp
+            s = pxx + r
+            d2 = (resid * resid) @ _XYZ / s                       # NaN where not observed
+            accept = obs & live & (d2 <= self.gate)
+            rejected = obs & live & ~accept
+            rejects = np.where(rejected, self.rejects + 1, 0)
+            start = obs & (~live | (rejects >= self.reinit_after))
+            accept &= ~start
+            k1, k2 = pxx / s, pxv / s
+        a3, s3 = accept[..., None], start[..., None]
+        self.x = np.where(s3, z, np.where(a3, xp + k1[..., None] * resid, self.x))
+        held_v = np.where(live[..., None], self.v, 0.0)
+        self.v = np.where(s3, 0.0, np.where(a3, self.v + k2[..., None] * resid, held_v))
+        self.p_xx = np.where(start, r, np.where(accept, (1 - k1) * pxx, self.p_xx))
+        self.p_xv = np.where(start, 0.0, np.where(accept, (1 - k1) * pxv, self.p_xv))
+        self.p_vv = np.where(start, self.v0, np.where(accept, pvv - k2 * pxv, self.p_vv))
+        upd = accept | start
+        self.t = np.where(upd, stamp, self.t)
+        self.count = np.where(start, 1, np.where(accept, self.count + 1,
+                                                 np.where(live, self.count, 0)))
+        self.rejects = np.where(start, 0, rejects)
+        held = live & ~upd
+        state = np.where(upd, _TRIANGULATED, np.where(held, _PREDICTED, _MISSING))
+        var = np.where(upd, self.p_xx, np.where(held, self.predict_variance(stamp), np.nan))
+        x = np.where((upd | held)[..., None], self.x, np.nan)
+        return KalmanUpdate(joints=x, state=state, variance=var, accepted=upd)
+
+    def body_velocity(self, rows: Optional[np.ndarray] = None) -> np.ndarray:
+        """
+        Return the ``[T, 3]`` body velocity: inverse-variance mean of the joint velocities.
+
+        Only joints updated at least twice since their (re)start count; NaN where none has.
+        """
+        w = np.where(self.count >= 2, 1.0 / np.maximum(self.p_vv, 1e-12), 0.0)
+        total = w.sum(axis=1)
         with np.errstate(invalid='ignore', divide='ignore'):
-            jump = (resid * resid) @ self._ones > self.reset_m ** 2      # NaN -> False
-            start = obs & (~live | jump)
-            second = obs & ~start & (self.count == 1) & (dt > 0)
-            restart = start | second                    # the position is the observation
-            steady = obs & ~restart
-            hold = ~obs & live & (stamp - self.last_seen <= self.max_gap_s + 1e-9)
-            x = np.where(restart[..., None], z,
-                         np.where(steady[..., None], pred + self.alpha * resid,
-                                  np.where(hold[..., None], pred, np.nan)))
-            gain = self.beta / dt if dt > 0 else 0.0
-            v = np.where(second[..., None], (z - self.x) / (dt if dt > 0 else 1.0),
-                         np.where(steady[..., None], self.v + gain * resid,
-                                  np.where(hold[..., None], self.v, 0.0)))
-        self.count = np.where(start, 1, np.where(obs, self.count + 1,
-                                                 np.where(hold, self.count, 0)))
-        self.last_seen = np.where(obs, stamp, self.last_seen)
-        self.x, self.v = x, v
-        state = np.where(obs, _TRIANGULATED, np.where(hold, _PREDICTED, _MISSING))
-        if single:
-            return x[0].copy(), state[0]
-        return x, state
+            vel = (w[..., None] * self.v).sum(axis=1) / total[:, None]
+        return np.where((total > 0)[:, None], vel, np.nan)
 
 
 def interpolate_gaps(traj: np.ndarray, max_gap: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -213,3 +276,120 @@ def smooth_track_sequence(frames: Sequence[Sequence[Track]], sigma_frames: float
             out[f][i] = dataclasses.replace(tr, joints=smooth[row].copy(), joint_state=state,
                                             confidence=conf, position=position)
     return out
+
+
+class FixedLagSmoother:
+    """
+    Fixed-lag smoothing of a live track stream: each set comes out ``lag`` sets later.
+
+    ``push(key, stamp, tracks)`` takes the tracks published for one set (public ids) and
+    returns the set ``lag`` pushes earlier, re-estimated with what came after it, or None
+    while the window fills; ``flush()`` returns the sets still held (end of a run, reset).
+    The tracks, their states and ids are those of the live output; only joints, root
+    position, velocity and variances change. Each joint is a local linear fit (position and
+    velocity at the set's stamp) to the observations the joint filters accepted within
+    ``back`` sets before and ``lag`` sets after, weighted by a Gaussian of ``sigma_sets`` sets
+    and by the inverse measurement variance. A joint not observed at the set but observed on
+    both sides becomes PREDICTED (interpolated); one without support keeps its live value.
+    ``lag = 0`` passes sets straight through.
+    """
+
+    def __init__(self, lag: int = 3, back: Optional[int] = None,
+                 sigma_sets: float = 2.0, root_joints: Optional[Tuple[int, int]] = None
+                 ) -> None:
+        """Create an empty smoother (``back`` defaults to ``2 * lag``)."""
+        if lag < 0 or sigma_sets <= 0:
+            raise ValueError(f'FixedLagSmoother: need lag >= 0 and sigma_sets > 0, got '
+                             f'lag={lag}, sigma_sets={sigma_sets}')
+        self.lag = int(lag)
+        self.back = 2 * self.lag if back is None else int(back)
+        self.sigma = float(sigma_sets)
+        self.root = root_joints
+        self._sets: List[Tuple[object, float, List[Track]]] = []
+        self._done = 0                    # sets of self._sets already returned
+
+    def push(self, key: object, stamp: float, tracks: Sequence[Track]
+             ) -> Optional[Tuple[object, float, List[Track]]]:
+        """Add one set; return ``(key, stamp, tracks)`` of the set ``lag`` pushes earlier."""
+        self._sets.append((key, float(stamp), list(tracks)))
+        if len(self._sets) - self._done <= self.lag:
+            return None
+        out = self._smooth(self._done)
+        self._done += 1
+        drop = max(0, self._done - self.back)
+        if drop:
+            del self._sets[:drop]
+            self._done -= drop
+        return out
+
+    def flush(self) -> List[Tuple[object, float, List[Track]]]:
+        """Return every set not yet returned (smoothed with what is known) and clear."""
+        out = [self._smooth(k) for k in range(self._done, len(self._sets))]
+        self._sets, self._done = [], 0
+        return out
+
+    def _smooth(self, k: int) -> Tuple[object, float, List[Track]]:
+        key, stamp, tracks = self._sets[k]
+        if self.lag == 0:
+            return key, stamp, tracks
+        lo, hi = max(0, k - self.back), min(len(self._sets), k + self.lag + 1)
+        window = self._sets[lo:hi]
+        by_id = [{t.track_id: t for t in s[2] if t.state != TrackState.DELETED}
+                 for s in window]
+        offsets = np.arange(lo, hi) - k
+        kernel = np.exp(-0.5 * (offsets / self.sigma) ** 2)
+        tau = np.array([s[1] for s in window]) - stamp
+        out = []
+        for tr in tracks:
+            if tr.state == TrackState.DELETED or tr.measurement is None:
+                out.append(tr)
+                continue
+            out.append(self._smooth_track(tr, [m.get(tr.track_id) for m in by_id], kernel,
+                                          tau, offsets))
+        return key, stamp, out
+
+    def _smooth_track(self, tr: Track, seq: List[Optional[Track]], kernel: np.ndarray,
+                      tau: np.ndarray, offsets: np.ndarray) -> Track:
+        num_j = tr.num_joints
+        z = np.full((len(seq), num_j, 3), np.nan)
+        r = np.full((len(seq), num_j), np.nan)
+        for i, t in enumerate(seq):
+            if t is not None and t.measurement is not None:
+                z[i], r[i] = t.measurement, t.measurement_variance
+        ok = np.isfinite(z[..., 0]) & np.isfinite(r) & (r > 0)
+        w = np.where(ok, kernel[:, None] / np.where(ok, r, 1.0), 0.0)            # [W, J]
+        tt = tau[:, None]
+        s0, s1, s2 = w.sum(0), (w * tt).sum(0), (w * tt * tt).sum(0)
+        zz = np.where(ok[..., None], z, 0.0)
+        sz = (w[..., None] * zz).sum(0)
+        stz = (w[..., None] * tt[..., None] * zz).sum(0)
+        det = s0 * s2 - s1 * s1
+        before = (ok & (offsets < 0)[:, None]).any(0)
+        after = (ok & (offsets > 0)[:, None]).any(0)
+        now = ok[offsets == 0].any(0) if (offsets == 0).any() else np.zeros(num_j, bool)
+        # a line needs support on both sides of the stamp (or at it): no extrapolation
+        line = (det > 1e-12 * np.maximum(s0 * s2, 1e-300)) & (now | (before & after))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            pos_line = (s2[:, None] * sz - s1[:, None] * stz) / det[:, None]
+            vel_line = (s0[:, None] * stz - s1[:, None] * sz) / det[:, None]
+            var_line = s2 / det
+            pos_mean = sz / s0[:, None]
+        mean = ~line & now                          # one stamp only: its weighted mean
+        joints = np.where(line[:, None], pos_line,
+                          np.where(mean[:, None], pos_mean, tr.joints))
+        var = tr.joint_variance if tr.joint_variance is not None else np.full(num_j, np.nan)
+        var = np.where(line, var_line, np.where(mean, 1.0 / np.where(mean, s0, 1.0), var))
+        state = np.where(now, _TRIANGULATED,
+                         np.where(line, _PREDICTED, tr.joint_state)).astype(np.uint8)
+        confidence = np.where((state == _PREDICTED) & (tr.joint_state == _MISSING),
+                              0.5 * np.max(tr.confidence, initial=0.0), tr.confidence)
+        position, velocity, cov = tr.position, tr.velocity, tr.position_covariance
+        if self.root is not None:
+            left, right = self.root
+            position = (joints[left] + joints[right]) / 2
+            cov = (var[left] + var[right]) / 4 * np.eye(3)
+            if line[left] and line[right]:
+                velocity = (vel_line[left] + vel_line[right]) / 2
+        return dataclasses.replace(tr, joints=joints, joint_state=state, joint_variance=var,
+                                   confidence=confidence, position=position,
+                                   velocity=velocity, position_covariance=cov)

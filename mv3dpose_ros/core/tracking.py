@@ -22,15 +22,22 @@ on the ground plane (x, y; world z is up). A pair is accepted below the gate
 ``gate_m + gate_growth_mps * (time since the track was last observed)``: the paper's
 tau = 0.2 m between consecutive frames, widened for tracks that were not seen for a while and
 for low frame rates. Tracks and poses left over are matched once more with the wider
-``recovery_gate_m`` before new tracks start, so one noisy pose does not fork a track. With
-``predict`` each track is first moved by its velocity (constant
-velocity of the whole body, estimated from the joints seen in consecutive observations), so
-walking people stay inside the gate at low frame rates.
+``recovery_gate_m`` before new tracks start, so one noisy pose does not fork a track.
 
-Life cycle: a new track is TENTATIVE; after ``confirm_hits`` observations it is CONFIRMED; a
-confirmed track that misses a set is COASTING until it is observed again (CONFIRMED) or more
-than ``max_coast_s`` pass without observation (DELETED). A TENTATIVE track that misses a set is
-DELETED at once. Ids start at 1 and are never reused by a tracker, not even after ``reset``.
+Motion comes from the filtered state, never from raw observations: every track's joints run
+through per-joint Kalman filters (``core.smoothing.JointKalman``, which rejects single-frame
+outliers by an innovation gate), the track's pose is the filtered (held) pose, and its body
+velocity is the inverse-variance mean of the filtered joint velocities. With ``predict`` each
+track is moved by that velocity before matching, so walking people stay inside the gate at
+low frame rates. A pose matched only by the wider recovery gate updates the joints (through
+their own gates) but not the body velocity.
+
+Life cycle: a new track is TENTATIVE, or CONFIRMED at once when the caller says it is well
+supported (``confirm_at_birth``); after ``confirm_hits`` observations it is CONFIRMED; a
+confirmed track that misses a set is COASTING until it is observed again (CONFIRMED). A track
+not observed for more than ``max_coast_s`` is DELETED whatever the gate would accept: it takes
+no part in matching any more. A TENTATIVE track that misses a set is DELETED at once. Ids
+start at 1 and are never reused by a tracker, not even after ``reset``.
 
 Tracks are kept as a structure of arrays (``Tracks``), so an update costs the same few numpy
 operations whatever the number of people.
@@ -40,6 +47,7 @@ from dataclasses import dataclass, fields
 from typing import Callable, Optional, Union
 
 from mv3dpose_ros.core.association import gated_assignment
+from mv3dpose_ros.core.smoothing import JointKalman, KalmanUpdate
 from mv3dpose_ros.core.types import TrackState
 import numpy as np
 
@@ -54,6 +62,8 @@ _TENTATIVE, _CONFIRMED, _COASTING = (np.int8(s) for s in (
 _NONE = np.zeros(0, dtype=np.int64)       # no rows (read-only)
 _NONE.setflags(write=False)
 
+BirthRule = Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray]]
+
 
 @dataclass
 class TrackerConfig:
@@ -66,8 +76,14 @@ class TrackerConfig:
     confirm_hits: int = 3
     max_coast_s: float = 1.0
     min_birth_joints: int = 6
-    velocity_smoothing: float = 0.5     # weight of the old velocity in its running average
     recovery_gate_m: float = 0.5        # second-pass gate for tracks and poses left unmatched
+    # per-joint Kalman filters (core.smoothing.JointKalman)
+    accel_noise: float = 2.0            # white acceleration noise density [m^2/s^3]
+    init_speed_mps: float = 1.0         # prior std of a new joint's velocity (starts at 0)
+    gate_chi2: float = 16.3             # innovation gate (chi-square, 3 dof; 16.3 = 99.9 %)
+    reinit_after: int = 2               # consecutive rejections before a joint restarts
+    max_gap_s: float = 0.3              # a joint is held at most this long without update
+    measurement_std_m: float = 0.03     # measurement std when the caller gives no variance
 
 
 @dataclass
@@ -76,11 +92,12 @@ class Tracks:
 
     ids: np.ndarray             # [T] int64, > 0
     state: np.ndarray           # [T] int8 TrackState
-    pose: np.ndarray            # [T, J, 3] last observed joints (older values where missing)
-    fresh: np.ndarray           # [T, J] joints refreshed by the last observation
-    velocity: np.ndarray        # [T, 3] m/s, NaN until two observations
+    pose: np.ndarray            # [T, J, 3] filtered joints, held in gaps (NaN: never seen)
+    velocity: np.ndarray        # [T, 3] m/s filtered body velocity, NaN while unknown
     first_seen: np.ndarray      # [T] s
     last_observed: np.ndarray   # [T] s
+    first_seen_ns: np.ndarray   # [T] int64 ns, the same stamps exactly
+    last_observed_ns: np.ndarray    # [T] int64 ns
     hits: np.ndarray            # [T] observations
     missed: np.ndarray          # [T] consecutive updates without observation
 
@@ -88,10 +105,11 @@ class Tracks:
     def empty(cls, num_joints: int) -> 'Tracks':
         """Return zero tracks."""
         return cls(ids=np.zeros(0, dtype=np.int64), state=np.zeros(0, dtype=np.int8),
-                   pose=np.zeros((0, num_joints, 3)), fresh=np.zeros((0, num_joints), bool),
-                   velocity=np.zeros((0, 3)), first_seen=np.zeros(0),
-                   last_observed=np.zeros(0), hits=np.zeros(0, dtype=np.int64),
-                   missed=np.zeros(0, dtype=np.int64))
+                   pose=np.zeros((0, num_joints, 3)), velocity=np.zeros((0, 3)),
+                   first_seen=np.zeros(0), last_observed=np.zeros(0),
+                   first_seen_ns=np.zeros(0, dtype=np.int64),
+                   last_observed_ns=np.zeros(0, dtype=np.int64),
+                   hits=np.zeros(0, dtype=np.int64), missed=np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
         """Return the number of tracks."""
@@ -117,6 +135,7 @@ class TrackUpdate:
     detection: np.ndarray   # [T] index of the pose observed this update, -1 = none
     previous: np.ndarray    # [T] row of the track before the update, -1 = born now
     deleted: Tracks         # tracks deleted in this update (state DELETED), reported once
+    filtered: KalmanUpdate  # the joint filters' estimates at this stamp, [T, J] rows
 
 
 def centroid(poses: np.ndarray) -> np.ndarray:
@@ -149,47 +168,60 @@ def pose_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int = 3) -> n
 
 
 class Tracker:
-    """Assign 3D poses to tracks over time and run their life cycle."""
+    """Assign 3D poses to tracks over time, filter their joints and run their life cycle."""
 
     def __init__(self, num_joints: int, config: Optional[TrackerConfig] = None) -> None:
         """Create an empty tracker for poses of ``num_joints`` joints."""
         self.config = config or TrackerConfig()
         self.num_joints = int(num_joints)
-        self.tracks = Tracks.empty(self.num_joints)
         self.next_id = 1
+        self._clear()
+
+    def _clear(self) -> None:
+        cfg = self.config
+        self.tracks = Tracks.empty(self.num_joints)
+        self.filter = JointKalman(self.num_joints, cfg.accel_noise, cfg.init_speed_mps,
+                                  cfg.gate_chi2, cfg.reinit_after, cfg.max_gap_s)
 
     def reset(self) -> Tracks:
         """Drop all tracks (ids keep counting up) and return them marked DELETED."""
         dropped = self.tracks
         dropped.state = np.full(len(dropped), TrackState.DELETED, dtype=np.int8)
-        self.tracks = Tracks.empty(self.num_joints)
+        self._clear()
         return dropped
 
-    def update(self, poses: np.ndarray, stamp: float,
-               can_birth: Union[None, np.ndarray, Callable[[np.ndarray], np.ndarray]] = None
-               ) -> TrackUpdate:
+    def update(self, poses: np.ndarray, stamp: float, can_birth: BirthRule = None,
+               variance: Optional[np.ndarray] = None, confirm_at_birth: BirthRule = None,
+               stamp_ns: Optional[int] = None) -> TrackUpdate:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
 
         Updates ``self.tracks`` (live tracks: matched, coasting, and new ones last) and returns
-        which pose each live track took. Unmatched poses start tracks only where
-        ``can_birth [D]`` (default: all) holds and they have ``min_birth_joints`` joints;
-        ``can_birth`` may also be a function of the indices ``[N]`` of the unmatched poses
-        returning ``[N]`` booleans, so its work is only done when there are any.
+        which pose each live track took and the filtered joints. ``variance [D, J]`` is the
+        per-axis measurement variance of each joint in m^2 (default ``measurement_std_m``^2).
+        Unmatched poses start tracks only where ``can_birth [D]`` (default: all) holds and
+        they have ``min_birth_joints`` joints; a new track is CONFIRMED at once where
+        ``confirm_at_birth`` holds. Both rules may also be functions of the indices ``[N]`` of
+        the candidate poses returning ``[N]`` booleans, so their work is only done when there
+        are any. ``stamp_ns`` is the same stamp in integer nanoseconds (default: rounded).
         """
         cfg = self.config
+        stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
         tr = self.tracks
         num_t, num_d = len(tr), len(poses)
         det = np.full(num_t, -1)
+        recovered = np.zeros(num_t, dtype=bool)
+        unseen = np.maximum(stamp - tr.last_observed, 0.0)
+        alive = unseen <= cfg.max_coast_s + 1e-9        # expired tracks take no part at all
         if num_t and num_d:
             cost = pose_distance(tr.predicted(stamp, cfg.predict), poses, cfg.min_shared_joints)
-            gate = cfg.gate_m + cfg.gate_growth_mps * np.maximum(stamp - tr.last_observed, 0.0)
+            gate = np.where(alive, cfg.gate_m + cfg.gate_growth_mps * unseen, -1.0)
             rows, cols = gated_assignment(cost, gate[:, None])
             det[rows] = cols
             if cfg.recovery_gate_m > 0 and len(rows) < min(num_t, num_d):
                 # Second chance for the leftovers with a wider gate, before new tracks are
                 # started: one noisy 3D pose should not fork a person's track.
-                free_t = np.nonzero(det < 0)[0]
+                free_t = np.nonzero((det < 0) & alive)[0]
                 taken = np.zeros(num_d, dtype=bool)
                 taken[cols] = True
                 free_d = np.nonzero(~taken)[0]
@@ -197,16 +229,15 @@ class Tracker:
                     r2, c2 = gated_assignment(cost[np.ix_(free_t, free_d)],
                                               np.maximum(gate[free_t, None], cfg.recovery_gate_m))
                     det[free_t[r2]] = free_d[c2]
+                    recovered[free_t[r2]] = True
         hit = det >= 0
         all_hit = bool(hit.all())
         if num_t:
-            self._observe(hit, poses.take(det, axis=0) if all_hit else poses[det[hit]], stamp,
-                          all_hit)
+            self._observe(hit, stamp, stamp_ns, all_hit)
         if all_hit:                                 # the common case: nobody missed
             deleted, kept, live = Tracks.empty(self.num_joints), np.arange(num_t), tr
         else:
-            coast = ~hit & (tr.state != _TENTATIVE) \
-                & (stamp - tr.last_observed <= cfg.max_coast_s + 1e-9)
+            coast = ~hit & (tr.state != _TENTATIVE) & alive
             keep = hit | coast
             tr.missed = np.where(hit, 0, tr.missed + 1)
             tr.state = np.where(coast, _COASTING, tr.state)
@@ -214,72 +245,91 @@ class Tracker:
             deleted.state[:] = TrackState.DELETED
             kept = np.nonzero(keep)[0]
             live = tr.take(kept)
+            recovered = recovered[kept]
         new = _NONE
         matched = det[hit]
         if len(matched) < num_d:                    # else every pose continues a track
             born = np.ones(num_d, dtype=bool)
             born[matched] = False
             born &= np.isfinite(poses[..., 0]).sum(axis=1) >= cfg.min_birth_joints
-            if callable(can_birth):
-                if born.any():
-                    born[born] = can_birth(np.nonzero(born)[0])
-            elif can_birth is not None:
-                born &= can_birth
-            new = np.nonzero(born)[0]
+            new = np.nonzero(_rule(can_birth, born))[0]
+        det = det if all_hit else det[kept]
+        previous = kept
+        if len(new):
+            confirm = np.zeros(len(new), dtype=bool)
+            if confirm_at_birth is not None:
+                confirm = _rule(confirm_at_birth, np.ones(len(new), dtype=bool), new)
+            live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm))
+            det = np.concatenate((det, new))
+            previous = np.concatenate((kept, np.full(len(new), -1)))
+            recovered = np.concatenate((recovered, np.zeros(len(new), dtype=bool)))
         self.tracks = live
-        if not len(new):
-            return TrackUpdate(detection=det if all_hit else det[kept], previous=kept,
-                               deleted=deleted)
-        self.tracks = _concat(live, self._births(poses[new], stamp))
-        return TrackUpdate(detection=np.concatenate((det[kept], new)),
-                           previous=np.concatenate((kept, np.full(len(new), -1))),
-                           deleted=deleted)
+        filtered = self._filter(poses, variance, det, previous, stamp, recovered)
+        return TrackUpdate(detection=det, previous=previous, deleted=deleted,
+                           filtered=filtered)
 
-    def _births(self, poses: np.ndarray, stamp: float) -> Tracks:
-        n = len(poses)
-        state = TrackState.CONFIRMED if self.config.confirm_hits <= 1 else TrackState.TENTATIVE
+    def _filter(self, poses: np.ndarray, variance: Optional[np.ndarray], det: np.ndarray,
+                previous: np.ndarray, stamp: float, recovered: np.ndarray) -> KalmanUpdate:
+        """Run the joint filters of the live tracks; set their pose and body velocity."""
+        cfg, tr, num_j = self.config, self.tracks, self.num_joints
+        if variance is None:
+            variance = np.full(poses.shape[:2], cfg.measurement_std_m ** 2)
+        if len(det) and (det >= 0).all():
+            z, r = poses.take(det, axis=0), variance.take(det, axis=0)
+        else:                            # row D of the padded arrays is "not observed"
+            z = np.concatenate((poses, np.full((1, num_j, 3), np.nan))).take(det, axis=0)
+            r = np.concatenate((variance, np.full((1, num_j), np.nan))).take(det, axis=0)
+        self.filter.reindex(previous)
+        out = self.filter.update(z, r, stamp)
+        known = self.filter.count > 0
+        tr.pose = np.where(known[..., None], self.filter.x, tr.pose)
+        velocity = self.filter.body_velocity()
+        if recovered.any():              # not from a match outside the main gate
+            velocity = np.where(recovered[:, None], tr.velocity, velocity)
+        tr.velocity = velocity
+        return out
+
+    def _births(self, n: int, stamp: float, stamp_ns: int, confirm: np.ndarray) -> Tracks:
+        instant = self.config.confirm_hits <= 1
+        state = np.where(confirm | instant, _CONFIRMED, _TENTATIVE).astype(np.int8)
         ids = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
         self.next_id += n
-        return Tracks(ids=ids, state=np.full(n, state, dtype=np.int8), pose=poses.copy(),
-                      fresh=np.isfinite(poses[..., 0]), velocity=np.full((n, 3), np.nan),
-                      first_seen=np.full(n, stamp), last_observed=np.full(n, stamp),
+        return Tracks(ids=ids, state=state, pose=np.full((n, self.num_joints, 3), np.nan),
+                      velocity=np.full((n, 3), np.nan), first_seen=np.full(n, stamp),
+                      last_observed=np.full(n, stamp),
+                      first_seen_ns=np.full(n, stamp_ns, dtype=np.int64),
+                      last_observed_ns=np.full(n, stamp_ns, dtype=np.int64),
                       hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
 
-    def _observe(self, hit: np.ndarray, obs: np.ndarray, stamp: float,
+    def _observe(self, hit: np.ndarray, stamp: float, stamp_ns: int,
                  all_hit: bool = False) -> None:
-        """Fold the observations ``obs`` into the tracks ``hit`` (mask; ``all_hit``: all)."""
-        cfg = self.config
+        """Count the observation of the tracks ``hit`` (mask; ``all_hit``: all)."""
         tr = self.tracks
         if all_hit:
-            old, fresh_old, prev = tr.pose, tr.fresh, tr.velocity
-            dt = stamp - tr.last_observed
-        else:
-            old, fresh_old, prev = tr.pose[hit], tr.fresh[hit], tr.velocity[hit]
-            dt = stamp - tr.last_observed[hit]
-        ok = np.isfinite(obs[..., 0])
-        both = ok & fresh_old
-        n = both.sum(axis=1)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            v = np.where(both[..., None], obs - old, 0.0).sum(axis=1) / (n * dt)[:, None]
-        good = (n >= cfg.min_shared_joints) & (dt > 0)
-        a = cfg.velocity_smoothing
-        blended = np.where(np.isfinite(prev), a * prev + (1 - a) * v, v)
-        vel = np.where(good[:, None], blended, prev)
-        pose = np.where(ok[..., None], obs, old)
-        if all_hit:
-            tr.pose, tr.fresh, tr.velocity = pose, ok, vel
             tr.hits = tr.hits + 1
             tr.last_observed = np.full(len(tr), stamp)
+            tr.last_observed_ns = np.full(len(tr), stamp_ns, dtype=np.int64)
             tr.missed = np.zeros(len(tr), dtype=np.int64)
         else:
-            tr.pose, tr.fresh, tr.velocity = tr.pose.copy(), tr.fresh.copy(), tr.velocity.copy()
-            tr.pose[hit], tr.fresh[hit], tr.velocity[hit] = pose, ok, vel
             tr.hits = tr.hits + hit
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
-        confirm = (tr.state == _COASTING) | (tr.hits >= cfg.confirm_hits)
+            tr.last_observed_ns = np.where(hit, stamp_ns, tr.last_observed_ns)
+        confirm = (tr.state == _COASTING) | (tr.hits >= self.config.confirm_hits)
         if not all_hit:
             confirm &= hit
         tr.state = np.where(confirm, _CONFIRMED, tr.state)
+
+
+def _rule(rule: BirthRule, mask: np.ndarray, index: Optional[np.ndarray] = None) -> np.ndarray:
+    """Apply a birth rule (array over all poses, or function of indices) to ``mask``."""
+    mask = mask.copy()
+    if callable(rule):
+        if mask.any():
+            rows = np.nonzero(mask)[0] if index is None else index[mask]
+            mask[mask] = rule(rows)
+    elif rule is not None:
+        mask &= rule if index is None else np.asarray(rule)[index]
+    return mask
 
 
 def _concat(a: Tracks, b: Tracks) -> Tracks:

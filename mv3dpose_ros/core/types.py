@@ -22,7 +22,7 @@ NaN never leaves the core: the ROS and file adapters turn it into explicit valid
 
 from dataclasses import dataclass, field
 import enum
-from typing import Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
@@ -63,6 +63,16 @@ class Track:
     missed: int = 0                    # consecutive sets without association
     score: float = 0.0                 # track confidence [0, 1]
     source_cameras: Tuple[str, ...] = field(default_factory=tuple)
+    # Uncertainty (None when the producer has none, e.g. tracks read back from a file):
+    joint_variance: Optional[np.ndarray] = None        # [J] per-axis variance [m^2] of each
+    #                                                    joint, NaN where MISSING
+    position_covariance: Optional[np.ndarray] = None   # [3, 3] of the root [m^2], NaN if unknown
+    # What the joint filters accepted this cycle (for the fixed-lag smoother; not published):
+    measurement: Optional[np.ndarray] = None           # [J, 3] metres, NaN where none
+    measurement_variance: Optional[np.ndarray] = None  # [J] per-axis [m^2], NaN where none
+    # The stamps in exact integer nanoseconds (None: derive from the float seconds):
+    first_seen_ns: Optional[int] = None
+    last_observed_ns: Optional[int] = None
 
     @property
     def num_joints(self) -> int:
