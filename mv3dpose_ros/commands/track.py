@@ -35,10 +35,14 @@ person linked into one id, tracks confirmed from their first frame, ghosts and p
 after a person's last observation dropped).
 
 Output: JSON Lines, one line per frame (``io.tracks_jsonl``), with one DELETED tombstone per
-ended track; consumers pick the states they want.
+ended track; consumers pick the states they want. The file is written to a temporary file
+beside it and renamed into place only when the run succeeds. Exit status: 0 done, 1 cannot
+write, 2 bad arguments or unreadable calibration / folders, 3 done but malformed pose files
+were skipped (each named on stderr).
 """
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import os
@@ -259,11 +263,10 @@ def run(args) -> int:
     progress = not args.no_progress and sys.stderr.isatty()
     confirmed, reproj = set(), []
     t0 = time.perf_counter()
-    out = sys.stdout if args.output == '-' else args.output
     try:
         if args.output != '-' and os.path.dirname(os.path.abspath(args.output)):
             os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
-        with TracksWriter(out, layout.name) as writer:
+        with _output(args.output) as out, TracksWriter(out, layout.name) as writer:
             frames = run_fusion(fusion, seq, args.fps, progress)
             if args.smooth == 'offline':
                 done = list(frames)
@@ -304,4 +307,16 @@ def run(args) -> int:
             print(f'  {issue}', file=sys.stderr)
         if len(seq.issues) > 20:
             print(f'  ... and {len(seq.issues) - 20} more', file=sys.stderr)
+        return 3      # done, but input was skipped: scripts must notice
     return 0
+
+
+@contextlib.contextmanager
+def _output(path: str):
+    """Yield standard output for '-', else a temp file renamed onto ``path`` on success."""
+    from mv3dpose_ros.core.files import atomic_path
+    if path == '-':
+        yield sys.stdout
+        return
+    with atomic_path(path) as tmp:
+        yield tmp
