@@ -27,6 +27,7 @@ from typing import List, Optional
 
 # name -> one-line help; the module mv3dpose_ros.commands.<name> implements it.
 COMMANDS = {
+    'detect': '2D poses of per-camera image folders or videos as OpenPose JSON (offline)',
     'track': 'track people in 3D from per-camera OpenPose JSON folders (offline)',
     'eval': 'score a tracks file against ground truth (PCP, MPJPE, MOTA)',
     'model': 'fetch and inspect 2D pose models (ONNX)',
