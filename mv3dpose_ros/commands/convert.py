@@ -29,6 +29,10 @@ Camera names come from the calibration; folder names are matched to them (exactl
 loosely: Pose2Sim's ``cam01_json`` is ``cam_01``). A folder without a calibrated camera, or a
 requested camera without a folder, is an error naming both sides. ``<cam>`` in topic names is
 the camera name, or ``cam<name>`` when the name is no valid ROS name token (``00_03``).
+
+Outputs appear only complete (bags via ``BagWriter``, JSON Lines via a temp file renamed on
+success). Exit status: 0 done, 1 error naming the file, 3 done but malformed input files or
+lines were skipped (each named on stderr).
 """
 
 import argparse
@@ -406,8 +410,13 @@ def tracks_from_bag(path: str, topic: Optional[str] = None
             raise BagError(f'{path}: no {TRACKS_TYPE} topic {topic} '
                            f'(track topics: {", ".join(topics) or "none"})')
         for m in reader.messages([topic]):
-            msg = deserialize_message(m.data, TrackedSkeletonArray)
-            yield stamp_to_ns(msg.header.stamp), msg.layout, msg_to_tracks(msg)
+            try:
+                msg = deserialize_message(m.data, TrackedSkeletonArray)
+                tracks = msg_to_tracks(msg)
+            except Exception as exc:  # noqa: B902 - rclpy raises RMWError and friends
+                raise BagError(f'{path}: undecodable {TRACKS_TYPE} on {topic} at '
+                               f'{m.timestamp} ns: {str(exc).splitlines()[0][:200]}') from None
+            yield stamp_to_ns(msg.header.stamp), msg.layout, tracks
 
 
 def record_to_track(rec, stamp: float):
@@ -566,6 +575,8 @@ def run(args: argparse.Namespace) -> int:
                   f'({s["first_frame"]}..{s["last_frame"]}), {s["messages"]} messages')
             for issue in s['issues']:
                 print(f'skipped {issue}', file=sys.stderr)
+            if s['issues']:
+                return 3          # written, but malformed input files were left out
         else:
             if bag_path_type(args.input) == 'bag' or not os.path.exists(args.input):
                 if not os.path.exists(args.input):
@@ -579,7 +590,9 @@ def run(args: argparse.Namespace) -> int:
                 for issue in s['issues']:
                     print(f'skipped {issue}', file=sys.stderr)
             print(f'wrote {s["output"]}: {s["frames"]} frames, {s["tracks"]} track ids')
-    except (ConvertError, BagError, OSError) as exc:
+            if s.get('issues'):
+                return 3          # written, but malformed lines were left out
+    except (ConvertError, BagError, OSError, ValueError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
     return 0

@@ -128,11 +128,17 @@ def run(args) -> int:
           f'truth {args.gt} ({gt.layout})')
     print(report.text())
     if args.json:
+        from mv3dpose_ros.core.files import atomic_path
         out: Optional[dict] = report.as_dict()
         try:
-            with open(args.json, 'w', encoding='utf-8') as f:
+            with atomic_path(args.json) as tmp, open(tmp, 'w', encoding='utf-8') as f:
                 json.dump(out, f, indent=2)
         except OSError as e:
             print(f'mv3dpose eval: cannot write {args.json}: {e}', file=sys.stderr)
             return 1
+    skipped = issues + [n for n in gt.notes if n.startswith(('skipped ', f'{args.gt}:'))]
+    if skipped:
+        print(f'mv3dpose eval: {len(skipped)} malformed input(s) skipped; the figures leave '
+              'them out', file=sys.stderr)
+        return 3
     return 0

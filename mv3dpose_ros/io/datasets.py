@@ -26,12 +26,12 @@ Ground-truth loaders for the public multi-view datasets (metres, the calibration
 
 from dataclasses import dataclass, field
 import glob
-import json
 import os
 import re
 from typing import List, Tuple
 
 from mv3dpose_ros.core.calibration import PANOPTIC_SCALE, PANOPTIC_TO_WORLD
+from mv3dpose_ros.core.files import load_json, LoadError, read_text
 import numpy as np
 
 #: The Campus evaluation frames used by Belagiannis et al., VoxelPose and others (inclusive).
@@ -153,7 +153,7 @@ def _panoptic_body(body, path: str) -> Tuple[int, np.ndarray]:
         raise DatasetError(f'{path}: body without id or joints19')
     try:
         joints = np.array(body['joints19'], dtype=float).reshape(19, 4)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise DatasetError(f'{path}: body {body.get("id")}: joints19 must be 76 numbers '
                            f'(19 x, y, z, c)') from None
     out = np.empty((19, 4))
@@ -162,7 +162,12 @@ def _panoptic_body(body, path: str) -> Tuple[int, np.ndarray]:
     missing = ~(np.isfinite(joints).all(axis=1) & (joints[:, 3] >= 0))
     out[missing, :3] = np.nan
     out[missing, 3] = 0.0
-    return int(body['id']), out
+    if np.abs(out[~missing, :3]).max(initial=0.0) > 1e6:
+        raise DatasetError(f'{path}: body {body.get("id")!r}: joints19 beyond 1e6 m')
+    bid = body['id']
+    if isinstance(bid, bool) or not isinstance(bid, int) or not 0 <= bid < 2 ** 63:
+        raise DatasetError(f'{path}: body id {repr(bid)[:40]} is not a non-negative integer')
+    return bid, out
 
 
 def load_panoptic_gt(folder: str, pattern: str = '*.json') -> PanopticGroundTruth:
@@ -182,17 +187,22 @@ def load_panoptic_gt(folder: str, pattern: str = '*.json') -> PanopticGroundTrut
     frames, bodies, times, skipped = [], [], [], []
     for number, path in numbered:
         try:
-            with open(path, 'r', encoding='utf-8') as f:
-                data = json.load(f)
+            data = load_json(read_text(path, 64 * 1024 * 1024))
             if not isinstance(data, dict) or not isinstance(data.get('bodies'), list):
                 raise DatasetError(f'{path}: no "bodies" list')
             frame = [_panoptic_body(b, path) for b in data['bodies']]
-        except (OSError, ValueError) as e:   # DatasetError and JSONDecodeError included
+            univ = data.get('univTime', np.nan)
+            if isinstance(univ, bool) or not isinstance(univ, (int, float)):
+                raise DatasetError(f'{path}: univTime {repr(univ)[:40]} is not a number')
+        except LoadError as e:
+            skipped.append((path, f'{path}: {e}'))
+            continue
+        except (OSError, ValueError) as e:   # DatasetError included
             skipped.append((path, str(e)))
             continue
         frames.append(number)
         bodies.append(frame)
-        times.append(float(data.get('univTime', np.nan)))
+        times.append(float(univ))
     if not frames:
         reasons = '; '.join(r for _, r in skipped[:3])
         raise DatasetError(f'{folder}: no usable Panoptic ground-truth JSON files '
