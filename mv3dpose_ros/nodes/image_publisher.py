@@ -19,10 +19,12 @@ For users without a camera driver. It publishes what a driver does: ``image_raw`
 ``camera_info`` with ``--calibration``, same header) under the camera's namespace, so
 ``mv3dpose_image_publisher DIR --camera 00_03`` publishes ``/cam00_03/image_raw``, the default
 image topic of mv3dpose_bringup (camera names map to ROS names as in ``ros/names.py``; a
-``-r __ns:=/x`` remap wins). Each frame is stamped with the node clock when it is published,
-like a driver's capture stamp; with ``--start-stamp S`` frame ``k`` is stamped exactly
-``S + k / rate`` instead, so publishers given the same ``--start-stamp`` and ``--rate`` produce
-identical stamps frame for frame whenever each process started.
+``-r __ns:=/x`` remap wins). It runs free at ``--rate`` on the system clock and stamps each
+frame with its capture instant, like a driver: with ``--trigger grid`` (default) the instants
+are the multiples of the period, as for cameras triggered from one synchronised clock, so
+publishers of the same rate stamp the same instants whenever each process started; with
+``--trigger free`` each publisher has its own phase. With ``--start-stamp S`` frame ``k`` is
+stamped ``S + k / rate`` instead (reproducible stamps).
 
 ``--encoding`` publishes any encoding camera drivers use (bgr8, rgb8, mono8, bgra8, rgba8,
 mono16, yuv422, yuv422_yuy2); ``--compressed jpeg|png`` publishes ``sensor_msgs/CompressedImage``
@@ -32,8 +34,9 @@ on ``image_raw/compressed`` instead, as image_transport's compressed plugin does
         --calibration ../shared/data/panoptic_demo/camera_parameters.json --camera 00_03
 
 Every option is also a ROS parameter (``source``, ``rate_hz``, ``loop``, ``start_stamp``,
-``frame_id``, ``encoding``, ``compressed``, ``calibration``, ``camera_name``, ``reliability``,
-``max_frames``, ``wait_for_subscribers``, ``preload``), so ``--params-file`` works too.
+``trigger``, ``frame_id``, ``encoding``, ``compressed``, ``calibration``, ``camera_name``,
+``reliability``, ``max_frames``, ``wait_for_subscribers``, ``preload``), so ``--params-file``
+works too.
 """
 
 import argparse
@@ -65,7 +68,11 @@ PARAMETERS = {
     'rate_hz': (10.0, 'publish rate; also the stamp spacing (1 / rate_hz)'),
     'loop': (False, 'start again after the last frame (stamps keep increasing)'),
     'start_stamp': (0.0, 'stamp of frame 0 [s], frame k at start + k / rate_hz; 0 = each frame '
-                         'stamped with the node clock when it is published (like a driver)'),
+                         'stamped with its capture instant on the node clock (like a driver)'),
+    'trigger': ('grid', 'grid: capture instants on the multiples of 1 / rate_hz of the clock '
+                        '(cameras triggered from one synchronised clock: all publishers of a '
+                        'rate stamp the same instants) | free: every 1 / rate_hz from the '
+                        'start (unsynchronised cameras)'),
     'frame_id': ('', 'header.frame_id; empty = <camera ROS name>_optical_frame'),
     'encoding': ('bgr8', 'bgr8 | rgb8 | mono8 | bgra8 | rgba8 | mono16 | yuv422 | yuv422_yuy2'),
     'compressed': ('', "'' = raw Image on image_raw; jpeg | png = CompressedImage on "
@@ -152,6 +159,8 @@ class ImagePublisher(Node):
         if p['encoding'] not in PUBLISH_ENCODINGS:
             raise ValueError(f'encoding must be one of {", ".join(PUBLISH_ENCODINGS)}, got '
                              f'{p["encoding"]!r}')
+        if p['trigger'] not in ('grid', 'free'):
+            raise ValueError(f"trigger must be 'grid' or 'free', got {p['trigger']!r}")
         if p['compressed'] not in ('', 'jpeg', 'png'):
             raise ValueError(f"compressed must be '', 'jpeg' or 'png', got {p['compressed']!r}")
         self.params = p
@@ -183,43 +192,83 @@ class ImagePublisher(Node):
         self.period_ns = int(round(1e9 / float(p['rate_hz'])))
         self.start_ns = int(round(float(p['start_stamp']) * 1e9)) or None
         self.stamp_now = self.start_ns is None
-        self.count = 0
+        self.count = self.skipped = 0
         self.done = threading.Event()
-        self.timer = self.create_timer(1.0 / float(p['rate_hz']), self._tick)
         self.get_logger().info(
             f'{p["source"]} -> {self.image_pub.topic_name} [{describe(qos)}] '
             f'{p["compressed"] or p["encoding"]} at {p["rate_hz"]:g} Hz, stamps '
-            f'{"node clock" if self.stamp_now else "start + k / rate"}, frame_id {self.frame_id}'
+            f'{p["trigger"] + " capture instants" if self.stamp_now else "start + k / rate"}, '
+            f'frame_id {self.frame_id}'
             + (f', CameraInfo of {self.camera_name}' if self.camera_info else ''))
 
     def stamp_ns(self, k: int) -> int:
         """Return the stamp of frame ``k`` in nanoseconds."""
         return self.start_ns + k * self.period_ns
 
-    def _tick(self) -> None:
-        if self.done.is_set():
-            return
-        need = int(self.params['wait_for_subscribers'])
-        if self.count == 0 and self.image_pub.get_subscription_count() < need:
-            return
+    def _next_frame(self) -> Optional[np.ndarray]:
         limit = int(self.params['max_frames'])
-        frame = self.source.read_next() if not (limit and self.count >= limit) else None
-        if frame is None and self.params['loop'] and not (limit and self.count >= limit):
+        if limit and self.count >= limit:
+            return None
+        frame = self.source.read_next()
+        if frame is None and self.params['loop']:
             self.source.rewind()
             frame = self.source.read_next()
-        if frame is None:
-            self.get_logger().info(f'published {self.count} frames; end of {self.source.path}')
-            self.done.set()
-            return
-        if self.stamp_now:
-            self.start_ns = self.get_clock().now().nanoseconds - self.count * self.period_ns
+        return frame
+
+    def run(self) -> None:
+        """
+        Publish each frame at its capture instant until the source ends or ``done`` is set.
+
+        ``trigger`` grid: instants are the multiples of the period on the node clock (the
+        system clock), as for cameras triggered from one synchronised clock, so publishers with
+        the same rate in any number of processes or hosts (chrony / PTP) stamp the same
+        instants; free: one period after the previous frame, from the first one. When
+        publishing falls behind, grid instants that have passed are skipped (counted) rather
+        than published late.
+        """
+        clock = self.get_clock()
+        need = int(self.params['wait_for_subscribers'])
+        while need and self.image_pub.get_subscription_count() < need:
+            if self.done.wait(0.05):
+                return
+        grid = self.params['trigger'] == 'grid' and self.stamp_now
+        now = clock.now().nanoseconds
+        due = (now // self.period_ns + 1) * self.period_ns if grid else now
+        while not self.done.is_set():
+            now = clock.now().nanoseconds
+            if now < due:
+                self.done.wait(min(due - now, 100_000_000) / 1e9)
+                continue
+            if grid and now - due >= self.period_ns:
+                late = (now - due) // self.period_ns
+                self.skipped += late
+                due += late * self.period_ns
+                self.get_logger().warn(
+                    f'publishing fell behind {self.params["rate_hz"]:g} Hz: {self.skipped} '
+                    'frame instants skipped so far (CPU overloaded?)', throttle_duration_sec=10.0)
+            frame = self._next_frame()
+            if frame is None:
+                break
+            self._publish(frame, due if grid else (now if self.stamp_now else
+                                                   self.stamp_ns(self.count)))
+            due += self.period_ns
+        text = (f'published {self.count} frames'
+                + (f', skipped {self.skipped} instants' if self.skipped else '')
+                + (f'; end of {self.source.path}' if not self.done.is_set() else ''))
+        if self.context.ok():
+            self.get_logger().info(text)
+        else:                           # stopped by a signal: rosout is gone
+            print(f'[image_publisher] {text}', file=sys.stderr, flush=True)
+        self.done.set()
+
+    def _publish(self, frame: np.ndarray, stamp_ns: int) -> None:
         if self.camera_info is not None and (frame.shape[1], frame.shape[0]) != (
                 self.camera_info.width, self.camera_info.height):
             self.get_logger().warn(
                 f'frame {self.count} is {frame.shape[1]}x{frame.shape[0]} but the calibration '
                 f'of {self.camera_name} is {self.camera_info.width}x{self.camera_info.height}',
                 throttle_duration_sec=10.0)
-        header = Header(stamp=ns_to_stamp(self.stamp_ns(self.count)), frame_id=self.frame_id)
+        header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.frame_id)
         if self.params['compressed']:
             gray = self.params['encoding'] in ('mono8', 'mono16')
             self.image_pub.publish(numpy_to_compressed(
@@ -243,6 +292,10 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
     parser.add_argument('--start-stamp', type=float, dest='start_stamp',
                         help='stamp frame k start + k / rate [s] (default: the node clock at '
                         'publication); give the same to every camera for identical stamps')
+    parser.add_argument('--trigger', choices=('grid', 'free'),
+                        help='grid (default): capture instants on the multiples of 1 / rate of '
+                        'the clock, the same for every publisher (a synchronised rig); free: '
+                        'from the start, own phase')
     parser.add_argument('--frame-id', dest='frame_id')
     parser.add_argument('--encoding', choices=PUBLISH_ENCODINGS)
     parser.add_argument('--compressed', choices=('jpeg', 'png'),
@@ -269,8 +322,14 @@ def main(args: Optional[List[str]] = None) -> int:
         node = ImagePublisher(parameter_overrides=overrides)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while rclpy.ok() and not node.done.is_set():
-            executor.spin_once(timeout_sec=0.1)
+        worker = threading.Thread(target=node.run, name='publisher', daemon=True)
+        worker.start()
+        try:
+            while rclpy.ok() and not node.done.is_set():
+                executor.spin_once(timeout_sec=0.1)
+        finally:
+            node.done.set()
+            worker.join(timeout=5.0)
         for _ in range(5):             # let the last messages go out
             executor.spin_once(timeout_sec=0.1)
     except ValueError as exc:
