@@ -213,6 +213,8 @@ def test_payload_corruption_is_detected_naming_file_and_chunk(tmp_path, storage)
         text = str(err.value)
         assert str(bad) in text and 'corrupt' in text, text
         assert ('chunk 0 (at byte' in text) if storage == 'mcap' else ('message on /' in text)
+        with pytest.raises(BagError, match='corrupt'):
+            info(bad, verify=True)                       # bag info checks every CRC
         rejected += 1
     assert rejected == 10
     # the summary (chunk index, statistics) is covered by the footer CRC

@@ -27,7 +27,8 @@ play    publishes the raw bytes at the recorded pace (``--rate``), each preceded
         ``rosgraph_msgs/Clock`` carrying the message's bag time, so nodes with ``use_sim_time``
         follow the bag; ``--loop`` makes the clock jump back, which the fusion node treats as
         a reset.
-info    prints topics, types, counts, QoS, duration and storage.
+info    prints topics, types, counts, QoS, duration and storage, after checking every chunk
+        CRC (``--no-verify`` skips that).
 recover salvages interrupted recordings (``.NAME.partial-PID`` of dead processes) into bags.
 """
 
@@ -41,7 +42,7 @@ import time
 from typing import Dict, Iterable, List, Optional, Sequence
 
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, partial_dirs
-from mv3dpose_ros.io.bag import salvage, STORAGES
+from mv3dpose_ros.io.bag import salvage, STORAGES, verify_bag
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 
@@ -461,10 +462,16 @@ def _qos_text(profiles: Sequence[Qos]) -> str:
                              f'/{p.history.name.lower()}({p.depth})' for p in profiles}))
 
 
-def info(path: str) -> dict:
-    """Return a summary of the bag at ``path`` (what ``mv3dpose bag info`` prints)."""
+def info(path: str, verify: bool = False) -> dict:
+    """
+    Return a summary of the bag at ``path`` (what ``mv3dpose bag info`` prints).
+
+    ``verify`` also checks every chunk / message CRC (reads the whole bag once).
+    """
+    integrity = verify_bag(path) if verify else 'not verified (--no-verify)'
     with BagReader(path) as reader:
         return {
+            'integrity': integrity,
             'path': str(path),
             'storage': reader.storage,
             'messages': reader.message_count,
@@ -488,6 +495,7 @@ def format_info(summary: dict) -> str:
              f'start:     {_ns_text(summary["start_ns"])} s',
              f'end:       {_ns_text(summary["end_ns"])} s',
              f'messages:  {summary["messages"]}',
+             f'integrity: {summary.get("integrity", "not verified")}',
              f'topics:    {len(summary["topics"])}']
     width = max([len(t) for t in summary['topics']] + [5])
     tw = max([len(v['type']) for v in summary['topics'].values()] + [4])
@@ -584,6 +592,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     inf = sub.add_parser('info', help='print topics, types, counts, duration and storage')
     inf.add_argument('bag', help='bag directory or .mcap / .db3 file')
     inf.add_argument('--json', action='store_true', help='print JSON instead of text')
+    inf.add_argument('--no-verify', dest='verify', action='store_false',
+                     help='skip the CRC check of every chunk / message (fast on huge bags)')
 
     rcv = sub.add_parser('recover', help='salvage an interrupted recording (.NAME.partial-PID) '
                                          'into a bag')
@@ -598,7 +608,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``mv3dpose bag <record|play|info>``."""
     try:
         if args.bag_command == 'info':
-            summary = info(args.bag)
+            summary = info(args.bag, verify=args.verify)
             print(json.dumps(summary, indent=2) if args.json else format_info(summary))
             return 0
         if args.bag_command == 'record':

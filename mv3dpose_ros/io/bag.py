@@ -269,6 +269,50 @@ def verify_mcap_chunks(path: PathLike) -> int:
     return count
 
 
+def _verify_sqlite(db: Path) -> Optional[int]:
+    """Check every message row of a sqlite3 bag against its key; None if it has no keys."""
+    try:
+        with sqlite3.connect(f'file:{db}?mode=ro', uri=True) as conn:
+            if not conn.execute('SELECT 1 FROM sqlite_master WHERE name = ?',
+                                (CRC_TABLE,)).fetchone():
+                return None
+            conn.create_function('mv3dpose_key', 3, _message_key, deterministic=True)
+            (rows,) = conn.execute('SELECT COUNT(*) FROM messages').fetchone()
+            (keys,) = conn.execute(f'SELECT COUNT(*) FROM {CRC_TABLE}').fetchone()
+            bad = conn.execute(
+                'SELECT m.id, t.name, m.timestamp FROM messages m LEFT JOIN topics t '
+                'ON t.id = m.topic_id WHERE mv3dpose_key(m.topic_id, m.timestamp, m.data) '
+                f'NOT IN (SELECT key FROM {CRC_TABLE}) LIMIT 1').fetchone()
+        conn.close()
+    except sqlite3.Error as exc:
+        raise BagError(f'{db}: not a readable sqlite3 bag (corrupt): {exc}') from None
+    if bad is not None:
+        raise BagError(f'{db}: message row {bad[0]} (topic {bad[1]}, {bad[2]} ns) fails its '
+                       'CRC (data, topic or timestamp changed): the bag is corrupt')
+    if rows != keys:
+        raise BagError(f'{db}: {rows} message rows but {keys} CRC keys: rows were added or '
+                       'removed, the bag is corrupt')
+    return rows
+
+
+def verify_bag(path: PathLike) -> str:
+    """
+    Check the CRCs of every storage file of a bag (reads it all once); return a summary.
+
+    Raises ``BagError`` naming the file and the chunk (MCAP) or message row (sqlite3).
+    """
+    done = []
+    for f in _storage_files(Path(path)):
+        if f.suffix == '.mcap':
+            _mcap_summary_crc(f)
+            done.append(f'{f.name}: {verify_mcap_chunks(f)} chunk CRCs verified')
+        elif f.suffix == '.db3':
+            n = _verify_sqlite(f)
+            done.append(f'{f.name}: ' + (f'{n} message CRCs verified' if n is not None
+                                         else 'no CRCs (written by another tool), unchecked'))
+    return '; '.join(done) or 'no storage file'
+
+
 def _storage_files(path: Path) -> List[Path]:
     if path.is_dir():
         return sorted(list(path.glob('*.mcap')) + list(path.glob('*.db3')))
