@@ -27,6 +27,7 @@ Package metadata against the code: what ``mv3dpose_ros/`` and ``launch/`` import
 
 import ast
 from importlib.metadata import packages_distributions
+import json
 import os
 import re
 import subprocess
@@ -195,3 +196,32 @@ def test_console_scripts_have_unique_names_and_deprecated_aliases(new, old):
     assert res.returncode == 0 and 'usage:' in res.stdout, res.stderr
     assert f'{old}: this name is deprecated and will be removed in 0.2.0; use {new}' in \
         res.stderr
+
+
+def test_shipped_viewer_configs_name_the_published_topics_and_are_installed():
+    """config/mv3dpose.rviz and config/mv3dpose.foxglove.json show what the nodes publish."""
+    from mv3dpose_ros.nodes.foxglove_view import CAMERAS_TOPIC, SCENE_TOPIC
+    rviz = yaml.safe_load(open(os.path.join(ROOT, 'config', 'mv3dpose.rviz')))
+    manager = rviz['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == 'map'
+    topics = {d['Class'].split('/')[-1]: d['Topic']['Value']
+              for d in manager['Displays'] if 'Topic' in d}
+    assert topics == {'MarkerArray': '/fusion_node/markers', 'PoseArray': '/fusion_node/poses'}
+    layout = json.load(open(os.path.join(ROOT, 'config', 'mv3dpose.foxglove.json')))
+    panels = layout['configById']
+    three_d = next(v for k, v in panels.items() if k.startswith('3D!'))
+    assert {SCENE_TOPIC, CAMERAS_TOPIC} <= {t for t, c in three_d['topics'].items()
+                                           if c['visible']}
+    paths = [p['value'] for k, v in panels.items() if k.startswith('Plot!') for p in v['paths']]
+    paths += [v['topicPath'] for k, v in panels.items() if k.startswith('RawMessages!')]
+    assert paths and all(p.startswith('/fusion_node/tracks.skeletons') for p in paths)
+
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node['first']) + \
+            leaves(node['second'])
+    assert sorted(leaves(layout['layout'])) == sorted(panels)
+    share = os.path.join(ROOT, 'install', 'mv3dpose_ros', 'share', 'mv3dpose_ros', 'config')
+    if not os.path.isdir(share):
+        pytest.skip('package not built (make setup)')
+    for name in ('mv3dpose.rviz', 'mv3dpose.foxglove.json'):
+        assert os.path.isfile(os.path.join(share, name)), f'{name} not installed'

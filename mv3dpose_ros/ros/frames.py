@@ -16,7 +16,8 @@
 Coordinate frames of the rig and of the tracked people, as ``geometry_msgs``.
 
 - Cameras: ``world_frame`` -> ``<camera>_optical_frame`` (REP-103 optical frame: x right,
-  y down, z forward), translation = camera centre, rotation = camera -> world. The rig YAML's
+  y down, z forward; ``<camera>`` is the camera's ROS name, ``ros/names.py``: ``00_03`` ->
+  ``cam00_03``), translation = camera centre, rotation = camera -> world. The rig YAML's
   ``T_world_cam`` is exactly this transform, so a static TF of it and the rig agree.
 - People: ``world_frame`` -> ``<prefix><track_id>`` at the root joint (hip midpoint) with the
   REP-155 body convention: x forward, y left, z up (the world's). The heading is the yaw of the
@@ -37,6 +38,7 @@ from mv3dpose_ros.core.calibration import matrix_to_quaternion, quaternion_to_ma
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.skeleton import Layout
 from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_ros.ros.names import camera_namespace
 import numpy as np
 from std_msgs.msg import Header
 
@@ -46,8 +48,8 @@ OPTICAL_FRAME = '{camera}_optical_frame'
 
 
 def optical_frame(camera: str, template: str = OPTICAL_FRAME) -> str:
-    """Return the frame id of ``camera`` from ``template`` (``{camera}`` = the camera id)."""
-    return template.format(camera=camera)
+    """Return the frame id of ``camera``: ``{camera}`` in ``template`` is its ROS name."""
+    return template.replace('{camera}', camera_namespace(camera))
 
 
 def quaternion_from_yaw(yaw: float) -> Quaternion:
