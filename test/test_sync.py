@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Unit tests of the N-stream synchroniser (message time only, no rclpy)."""
+"""Unit tests of the N-stream synchroniser (stamps in message time, waits on an arrival clock)."""
 
 import random
 
@@ -20,9 +20,11 @@ from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig
 import pytest
 
 MS = 1_000_000
+S = 1_000_000_000
 PERIOD = 33 * MS            # ~30 Hz
 T0 = 1_000_000 * MS         # 1000 s: any positive epoch
 CAMS = ['cam0', 'cam1', 'cam2']
+LATENCY = 5 * MS            # default arrival = stamp - T0 + LATENCY (arrival clock from 0)
 
 
 def make(cams=CAMS, **kw):
@@ -32,18 +34,24 @@ def make(cams=CAMS, **kw):
 
 
 def feed(sync, events):
-    """Add (cam, stamp_ns) events in order; return all emitted sets."""
+    """Add (cam, stamp_ns[, arrival_ns]) events in order; return all emitted sets."""
     out = []
-    for cam, stamp in events:
-        out += sync.add(cam, stamp, (cam, stamp)).sets
+    for ev in events:
+        cam, stamp = ev[0], ev[1]
+        now = ev[2] if len(ev) > 2 else stamp - T0 + LATENCY
+        out += sync.add(cam, stamp, (cam, stamp), now).sets
     return out
 
 
-def frames(n, cams=CAMS, jitter_ns=0, seed=0):
+def frames(n, cams=CAMS, jitter_ns=0, seed=0, period=PERIOD):
     """Per-frame, per-camera stamps with uniform capture jitter."""
     rng = random.Random(seed)
-    return [[(c, T0 + f * PERIOD + rng.randint(-jitter_ns, jitter_ns)) for c in cams]
+    return [[(c, T0 + f * period + rng.randint(-jitter_ns, jitter_ns)) for c in cams]
             for f in range(n)]
+
+
+def flat(frs):
+    return [e for fr in frs for e in fr]
 
 
 def test_complete_sets_emitted_immediately():
@@ -66,14 +74,17 @@ def test_complete_sets_emitted_immediately():
 
 def test_no_set_before_last_camera_or_max_wait():
     sync = make()
-    assert feed(sync, [('cam0', T0), ('cam1', T0 + MS)]) == []
+    assert feed(sync, [('cam0', T0, 0), ('cam1', T0 + MS, 0)]) == []
     assert sync.pending() == 2
+    assert sync.poll(99 * MS) == []              # the wait runs on the arrival clock
+    out = sync.poll(100 * MS)
+    assert len(out) == 1 and out[0].missing == ('cam2',)
 
 
 def test_jittered_stamps_group_by_frame_and_stamp_is_mean():
     sync = make(slop_s=0.012)
     evs = frames(50, jitter_ns=5 * MS, seed=3)
-    out = feed(sync, [e for fr in evs for e in fr])
+    out = feed(sync, flat(evs))
     assert len(out) == 50
     for f, s in enumerate(out):
         stamps = dict(evs[f])
@@ -85,64 +96,94 @@ def test_jittered_stamps_group_by_frame_and_stamp_is_mean():
 
 
 def test_reordered_arrivals_give_same_sets():
-    evs = [e for fr in frames(40, jitter_ns=4 * MS, seed=1) for e in fr]
+    evs = flat(frames(40, jitter_ns=4 * MS, seed=1))
     ref = feed(make(), evs)
     rng = random.Random(7)
-    shuffled = list(evs)
-    # Local reordering: swap neighbours within a few messages (cross-camera and own stream).
-    for i in range(0, len(shuffled) - 3, 2):
-        j = i + rng.randint(0, 3)
-        shuffled[i], shuffled[j] = shuffled[j], shuffled[i]
+    # Cameras' messages cross each other (random delivery delay up to 20 ms, below a frame
+    # period, so each camera's own stream stays in order as DDS keeps it).
+    arrivals = sorted(((c, s, s - T0 + rng.randint(0, 20 * MS)) for c, s in evs),
+                      key=lambda e: e[2])
+    assert [e[:2] for e in arrivals] != evs
     sync = make()
-    out = feed(sync, shuffled) + sync.flush()
+    out = feed(sync, arrivals) + sync.flush()
     assert [s.stamps_ns for s in out] == [s.stamps_ns for s in ref]
     assert sum(st.late for st in sync.stats.values()) == 0
 
 
-def test_partial_set_after_max_wait_in_message_time():
+def test_partial_set_waits_max_wait_of_arrival_time_not_message_time():
+    """A burst of newer frames (fast replay, DDS hiccup) does not expire a set early."""
     sync = make(max_wait_s=0.1)
-    evs = []
-    for f in range(10):
-        evs += [('cam0', T0 + f * PERIOD), ('cam1', T0 + f * PERIOD)]
-        if f != 2:
-            evs.append(('cam2', T0 + f * PERIOD))
+    # cam0 and cam1 deliver 12 frames (400 ms of message time) within 12 ms of arrival time;
+    # cam2, whose inference is slower, delivers the same frames 80 ms later.
+    evs = [(c, T0 + f * PERIOD, f * MS) for f in range(12) for c in ('cam0', 'cam1')]
+    evs += [('cam2', T0 + f * PERIOD, 80 * MS + f * MS) for f in range(12)]
     out = feed(sync, evs)
-    # Frame 2 is only emitted once the horizon passes pivot + max_wait (frame 2 + 100 ms).
-    stamps = [s.stamp_ns for s in out]
-    assert stamps == [T0 + f * PERIOD for f in range(10)]
-    partial = [s for s in out if not s.complete]
-    assert len(partial) == 1 and partial[0].missing == ('cam2',)
-    assert set(partial[0].messages) == {'cam0', 'cam1'}
-    assert sync.stats['cam2'].missing == 1 and sync.partial_sets == 1
-    assert sync.stats['cam0'].missing == 0
+    assert len(out) == 12 and all(s.complete for s in out)
+    assert sum(st.late + st.dropped for st in sync.stats.values()) == 0
 
 
-def test_partial_set_waits_for_horizon_not_arrival_order():
-    sync = make(max_wait_s=0.1)
-    feed(sync, [('cam0', T0), ('cam1', T0)])
-    # Newer messages within max_wait do not expire the pivot.
-    out = feed(sync, [('cam0', T0 + 90 * MS), ('cam1', T0 + 90 * MS)])
-    assert out == []
-    out = feed(sync, [('cam0', T0 + 120 * MS), ('cam1', T0 + 120 * MS)])
-    assert [s.stamp_ns for s in out] == [T0]   # T0 + 90 ms waits until the horizon > 190 ms
+def test_inference_skew_up_to_max_wait_loses_no_set():
+    """Free-running 60 fps: each camera's results arrive with its own inference delay."""
+    period = 16_667_000
+    delay = {'cam0': 10 * MS, 'cam1': 45 * MS, 'cam2': 95 * MS}    # skew 85 ms < max_wait
+    rng = random.Random(4)
+    evs = []
+    for f in range(300):
+        for c in CAMS:
+            stamp = T0 + f * period + rng.randint(-MS, MS)
+            evs.append((c, stamp, stamp - T0 + delay[c] + rng.randint(0, 3 * MS)))
+    evs.sort(key=lambda e: e[2])
+    sync = make(slop_s=0.0)
+    out = feed(sync, evs) + sync.poll(10 * S)
+    assert len(out) == 300
+    assert sum(s.complete for s in out) >= 295     # the first frames run before the period
+    assert sum(st.late for st in sync.stats.values()) == 0
 
 
-def test_single_future_stamp_does_not_flush_buffers():
-    sync = make()
-    feed(sync, [('cam0', T0), ('cam1', T0)])
-    assert feed(sync, [('cam2', T0 + 3600 * 10**9)]) == []  # one camera an hour ahead
-    assert sync.pending() == 3
-    out = feed(sync, [('cam2', T0 + 1 * MS)])   # cam2 own stream goes back >0.5 s: reset
-    assert out == [] and sync.resets == 1
+def test_slop_wider_than_half_the_frame_period_is_narrowed_and_named():
+    """sync.slop_s 17 ms at 60 fps would merge consecutive frames: every other frame lost."""
+    period = 16_667_000
+    sync = make(slop_s=0.017)
+    out = feed(sync, flat(frames(120, period=period, jitter_ns=MS, seed=2)))
+    assert len(out) >= 117                  # the first frames, before the period is known
+    assert sum(st.dropped for st in sync.stats.values()) <= 6
+    assert 'sync.slop_s 0.017 s is wider than half' in sync.slop_note
+    assert sync.slop_ns <= period // 2
 
 
-def test_too_few_views_pivot_dropped_and_counted():
-    sync = make(min_views=2)
-    later = [(c, T0 + f * PERIOD) for f in range(1, 6) for c in ('cam1', 'cam2')]
-    out = feed(sync, [('cam0', T0)] + later)
-    assert all(s.stamp_ns != T0 for s in out)
-    assert sync.pivots_dropped >= 1
-    assert sync.stats['cam0'].dropped == 1 and sync.stats['cam0'].used == 0
+def test_auto_slop_groups_free_running_cameras_with_phase_offsets():
+    """slop_s 0: half the observed period, so cameras 40 ms out of phase at 10 Hz still match."""
+    period = 100 * MS
+    phase = {'cam0': 0, 'cam1': 40 * MS, 'cam2': 25 * MS}
+    evs = sorted(((c, T0 + f * period + phase[c]) for f in range(60) for c in CAMS),
+                 key=lambda e: e[1])
+    sync = make(slop_s=0.0)
+    out = feed(sync, evs) + sync.flush()
+    assert sync.slop_ns == period // 2 and sync.slop_note == ''
+    # The first frames (period not known yet) use a 8 ms slop; every later one is complete.
+    assert all(s.complete for s in out[-50:]) and sync.pivots_dropped <= 15
+
+
+def test_half_rate_camera_joins_the_sets_it_has_frames_for_without_delaying_others():
+    period = 16_667_000
+    evs = []
+    for f in range(120):
+        for c in CAMS:
+            if c == 'cam2' and f % 2:
+                continue
+            evs.append((c, T0 + f * period))
+    sync = make(slop_s=0.0)
+    out = []
+    for ev in evs:
+        got = feed(sync, [ev])
+        if ev[0] == 'cam1' and ev[1] > T0 + 20 * period and round((ev[1] - T0) / period) % 2:
+            assert len(got) == 1, 'a frame without cam2 waited instead of being emitted'
+        out += got
+    assert len(out) == 120
+    late = out[20:]
+    assert all(s.complete == (round((s.stamp_ns - T0) / period) % 2 == 0) for s in late)
+    assert sync.stats['cam2'].used == 60 and sync.stats['cam2'].lost == 0
+    assert sync.stats['cam2'].rate_hz == pytest.approx(30.0, rel=0.01)
 
 
 def test_silent_camera_gives_partial_sets_and_missing_counts():
@@ -156,12 +197,100 @@ def test_silent_camera_gives_partial_sets_and_missing_counts():
     assert sync.stats['cam0'].used == 30
 
 
+def test_silent_camera_adds_no_latency_once_known_silent():
+    sync = make()
+    out = feed(sync, flat(frames(10)))
+    assert len(out) == 10
+    for f in range(10, 20):               # cam2 stopped; the others go on
+        got = feed(sync, [(c, T0 + f * PERIOD) for c in ('cam0', 'cam1')])
+        if f >= 15:                       # > max_wait + period after cam2's last arrival
+            assert len(got) == 1 and got[0].missing == ('cam2',)
+
+
+@pytest.mark.parametrize('glitch_s', [1.0, -1.0, 3600.0, -0.6])
+def test_isolated_outlier_stamp_dropped_counted_without_reset(glitch_s):
+    sync = make()
+    out = feed(sync, flat(frames(10)))
+    bad = T0 + 10 * PERIOD + int(glitch_s * S)
+    res = sync.add('cam1', bad, 'glitch', 10 * PERIOD + LATENCY)
+    assert not res.accepted and not res.reset and res.kind == 'outlier'
+    assert 'sync.jump_s' in res.reason
+    out += feed(sync, flat(frames(20)[10:]))
+    assert sync.resets == 0
+    assert len(out) == 20 and all(s.complete for s in out)
+    assert sync.stats['cam1'].outliers == 1 and sync.stats['cam1'].dropped == 1
+    assert sync.stats['cam1'].lost == 0
+
+
+def test_one_stale_message_every_few_frames_never_resets():
+    sync = make()
+    out = []
+    for f in range(150):
+        out += feed(sync, frames(150)[f])
+        if f % 30 == 29:
+            cam = CAMS[(f // 30) % 3]
+            feed(sync, [(cam, T0 + (f - 60) * PERIOD, f * PERIOD + LATENCY + MS)])
+    assert sync.resets == 0 and len(out) == 150
+    assert sum(st.outliers for st in sync.stats.values()) == 4
+
+
+def test_sustained_jump_on_two_cameras_resets_and_keeps_the_new_frames():
+    """A bag loop: every camera goes back 10 s; the held messages start the new timeline."""
+    sync = make(jump_confirm=3)
+    out = feed(sync, flat(frames(10)))
+    back = T0 - 10 * S
+    resets = []
+    arrival = 10 * PERIOD
+    for f in range(10):
+        for c in CAMS:
+            arrival += 11 * MS
+            res = sync.add(c, back + f * PERIOD, (c, f), arrival)
+            out += res.sets
+            resets.append(res.reset)
+    assert sync.resets == 1 and sum(resets) == 1
+    new = [s for s in out if s.stamp_ns < T0]
+    assert [s.stamp_ns for s in new] == [back + f * PERIOD for f in range(10)]
+    assert all(s.complete for s in new)
+
+
+def test_one_camera_with_a_wrong_clock_is_dropped_not_reset():
+    sync = make()
+    out = []
+    for f in range(30):
+        out += feed(sync, [('cam0', T0 + f * PERIOD), ('cam1', T0 + f * PERIOD),
+                           ('cam2', T0 + f * PERIOD + 2 * S, f * PERIOD + LATENCY)])
+    assert sync.resets == 0 and len(out) >= 29
+    assert sync.stats['cam2'].used == 0
+    assert sync.held_outliers + sync.stats['cam2'].outliers == 30
+
+
+def test_stamp_gaps_count_upstream_losses():
+    sync = make()
+    evs = [e for f, fr in enumerate(frames(100)) for e in fr
+           if not (e[0] == 'cam0' and f in (40, 41, 42, 70))]
+    feed(sync, evs)
+    assert sync.stats['cam0'].lost == 4
+    assert sync.stats['cam1'].lost == 0
+    assert sync.stats['cam0'].usual_rate_hz == pytest.approx(1e9 / PERIOD, rel=0.01)
+
+
+def test_too_few_views_pivot_dropped_and_counted():
+    sync = make(min_views=2)
+    later = [(c, T0 + f * PERIOD) for f in range(1, 6) for c in ('cam1', 'cam2')]
+    out = feed(sync, [('cam0', T0)] + later)
+    assert all(s.stamp_ns != T0 for s in out)
+    assert sync.pivots_dropped >= 1
+    assert sync.stats['cam0'].dropped == 1 and sync.stats['cam0'].used == 0
+    assert sync.stats['cam0'].unmatched['too_few_views'] == 1
+
+
 def test_late_message_dropped_and_counted():
     sync = make()
-    out = feed(sync, [e for fr in frames(6) for e in fr if e != ('cam2', T0 + PERIOD)])
+    out = feed(sync, [e for e in flat(frames(6)) if e != ('cam2', T0 + PERIOD)])
     assert any(s.stamp_ns == T0 + PERIOD and s.missing == ('cam2',) for s in out)
-    res = sync.add('cam2', T0 + PERIOD, 'late')
+    res = sync.add('cam2', T0 + PERIOD, 'late', 6 * PERIOD)
     assert not res.accepted and res.sets == [] and 'after its set' in res.reason
+    assert res.kind == 'late' and 'sync.max_wait_s' in res.reason
     st = sync.stats['cam2']
     assert st.late == 1 and st.dropped == 1 and st.received == 6
     assert sync.resets == 0
@@ -171,7 +300,7 @@ def test_late_message_dropped_and_counted():
 
 def test_drops_of_random_frames_every_set_has_min_views():
     rng = random.Random(11)
-    evs = [e for fr in frames(200, jitter_ns=3 * MS, seed=5) for e in fr if rng.random() > 0.15]
+    evs = [e for e in flat(frames(200, jitter_ns=3 * MS, seed=5)) if rng.random() > 0.15]
     sync = make()
     out = feed(sync, evs) + sync.flush()
     assert all(len(s.messages) >= 2 for s in out)
@@ -185,28 +314,21 @@ def test_drops_of_random_frames_every_set_has_min_views():
     assert sync.pending() == 0
 
 
-def test_backward_jump_resets_and_continues():
-    sync = make()
-    feed(sync, [e for fr in frames(5) for e in fr])
-    feed(sync, [('cam0', T0 + 5 * PERIOD)])
-    res = sync.add('cam1', T0 - 10 * 10**9, 'loop')     # bag loops 10 s back
-    assert res.reset and res.accepted and sync.resets == 1
-    assert sync.stats['cam0'].dropped == 1                # the pending cam0 message cleared
-    out = feed(sync, [('cam0', T0 - 10 * 10**9), ('cam2', T0 - 10 * 10**9)])
-    assert len(out) == 1 and out[0].complete and out[0].stamp_ns == T0 - 10 * 10**9
-
-
 def test_small_own_stream_reordering_is_not_a_jump():
     sync = make()
     feed(sync, [('cam0', T0 + 2 * PERIOD), ('cam0', T0 + PERIOD)])
     assert sync.resets == 0 and sync.pending() == 2
 
 
-def test_memory_bounded_per_camera():
-    sync = make(max_queue=8, min_views=3, max_wait_s=1000.0)
-    feed(sync, [('cam0', T0 + f * PERIOD) for f in range(100)])
-    assert sync.pending() == 8
-    assert sync.stats['cam0'].dropped == 92
+def test_memory_bounded_per_camera_by_deciding_early():
+    sync = make(max_queue=8, min_views=2, max_wait_s=1000.0)
+    # cam2 is slow and still "coming": without the bound every set would wait for it.
+    evs = [(c, T0 + f * PERIOD, 0) for f in range(100) for c in ('cam0', 'cam1')]
+    sync.add('cam2', T0 - PERIOD, 'x', 0)
+    out = feed(sync, evs)
+    assert sync.pending() <= 2 * 9
+    assert sync.overflow_decisions >= 90 and len(out) >= 90
+    assert all(s.missing == ('cam2',) for s in out)
 
 
 def test_duplicate_in_window_uses_nearest_and_drops_other():
@@ -215,17 +337,26 @@ def test_duplicate_in_window_uses_nearest_and_drops_other():
     # 'a' + the first 'b' already complete the set: the nearer 'b' arrives late.
     assert len(out) == 1 and out[0].stamps_ns['b'] == T0 + 10 * MS
     sync = make(cams=['a', 'b', 'c'])
-    out = feed(sync, [('a', T0), ('b', T0 + 10 * MS), ('b', T0 + 2 * MS), ('c', T0)])
+    out = feed(sync, [('a', T0, 0), ('b', T0 + 10 * MS, 0), ('b', T0 + 2 * MS, 0),
+                      ('c', T0, 0)])
     assert out[0].stamps_ns['b'] == T0 + 2 * MS
     assert sync.stats['b'].dropped == 1 and sync.stats['b'].used == 1
 
 
 def test_flush_emits_pending_sets():
     sync = make()
-    feed(sync, [('cam0', T0), ('cam1', T0), ('cam0', T0 + PERIOD)])
+    feed(sync, [('cam0', T0, 0), ('cam1', T0, 0), ('cam0', T0 + PERIOD, 0)])
     out = sync.flush()
     assert [s.stamp_ns for s in out] == [T0]
     assert sync.pending() == 0 and sync.stats['cam0'].dropped == 1
+
+
+def test_decide_through_makes_older_messages_late():
+    sync = make()
+    feed(sync, flat(frames(3)))
+    sync.decide_through(T0 + 10 * PERIOD)
+    res = sync.add('cam0', T0 + 5 * PERIOD, 'x', 5 * PERIOD)
+    assert res.kind == 'late'
 
 
 def test_single_camera_rig():
@@ -234,7 +365,8 @@ def test_single_camera_rig():
 
 
 @pytest.mark.parametrize('kw', [{'slop_s': -1.0}, {'min_views': 0}, {'max_queue': 0},
-                                {'max_wait_s': float('nan')}, {'backward_jump_s': 0.0}])
+                                {'max_wait_s': float('nan')}, {'jump_s': 0.0},
+                                {'jump_confirm': 0}])
 def test_bad_config_rejected(kw):
     with pytest.raises(ValueError):
         make(**kw)

@@ -17,44 +17,71 @@ N-stream synchroniser: groups per-camera messages by capture stamp (no rclpy).
 
 ``message_filters.ApproximateTimeSynchronizer`` searches all combinations (exponential in the
 number of cameras), never emits a set with a camera missing and reports no drops, so it does
-not fit N-camera fusion. This one works on integer-nanosecond header stamps only (never wall
-time), so replaying a bag at any rate gives the same sets:
+not fit N-camera fusion. This one groups by integer-nanosecond header stamps and decides when
+to stop waiting on the caller's *arrival* clock (the node's steady clock), so free-running
+cameras whose inference finishes at different times lose no set:
 
 * The *pivot* is the oldest buffered stamp. Each camera contributes its message nearest the
   pivot within ``[pivot, pivot + slop]``.
-* A set is emitted as soon as every camera has contributed (complete), or, once the stream
-  *horizon* has passed ``pivot + max_wait``, as a partial set when at least ``min_views``
-  cameras contributed (otherwise the pivot's messages are dropped).
-* The horizon is the second-newest per-camera latest stamp (the newest with one camera or
-  ``min_views`` 1), so a single camera with a bogus future stamp cannot flush everybody's
-  buffers, while a set that needs only one view can still expire.
-* A message whose stamp is not newer than ``pivot + slop`` of the last emitted (or dropped)
-  pivot arrives too late for its set: it is dropped and counted as ``late``.
-* A camera whose own stamps jump backwards by more than ``backward_jump_s`` (bag loop, driver
-  restart) resets the synchroniser; the caller is told so it can reset its tracker too.
-* Memory is bounded: at most ``max_queue`` messages per camera (oldest dropped first) and a
-  fixed window of offsets for the statistics.
+* A set is emitted as soon as every camera has contributed (complete). Otherwise it waits
+  until ``max_wait`` has passed on the arrival clock since the first of its messages arrived,
+  or until no missing camera can still contribute: by its observed frame period neither its
+  next frame nor (when a later one already arrived) the frame before that falls in the
+  window, e.g. a half-rate camera (a swapped pair of its own messages is still waited for),
+  or it has been silent for longer than ``max_wait`` plus its period. Then it is emitted as a
+  partial set when at least ``min_views`` cameras contributed, otherwise its messages are
+  dropped (``pivots_dropped``). ``poll(now)`` applies the wait when no message arrives.
+* The slop adapts to the cameras: each camera's frame period is the median of its recent
+  stamp steps, and the slop used is at most half of the shortest period (a wider slop would
+  merge consecutive frames of a camera and drop every other one). ``slop_s`` 0 means
+  "half the frame period"; a configured ``slop_s`` wider than that is narrowed and
+  ``slop_note`` says so (the node logs it naming the parameter ``sync.slop_s``).
+* A message whose stamp is not newer than ``pivot + slop`` of the last decided pivot arrives
+  too late for its set: it is dropped and counted as ``late``.
+* Stamps more than ``jump_s`` away from the stream's time (the newest accepted stamp,
+  advanced by the arrival time since) are *outliers*: held aside, and dropped and counted
+  when the camera's next message is normal again. Only a sustained jump (``jump_confirm``
+  consecutive outliers on each of at least two cameras, consistent with each other, e.g. a
+  bag loop or a driver restart) resets the synchroniser; the held messages then start the
+  new timeline and the caller is told so it can reset its tracker too.
+* Losses upstream are counted from the stamps: a step longer than 1.5 of the camera's usual
+  period counts the frames in between as ``lost``.
+* Memory is bounded: at most ``max_queue`` messages per camera (beyond it the oldest pivot is
+  decided at once, counted as ``overflow``) and fixed windows for the statistics.
 """
 
 from bisect import insort
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field
 import itertools
 import math
+import statistics
+import time
 from typing import Any, Deque, Dict, Iterable, List, Optional, Sequence, Tuple
 
 NS_PER_S = 1_000_000_000
+#: Stamp steps kept per camera for its frame period (median).
+PERIOD_WINDOW = 16
+#: Steps needed before a camera's period is trusted.
+PERIOD_MIN_STEPS = 4
+#: Slop used while no camera's period is known yet (half a 60 fps period).
+INITIAL_SLOP_S = 0.008
 
 
 @dataclass
 class SyncConfig:
-    """Synchroniser parameters; times in seconds of message (header) time."""
+    """Synchroniser parameters: stamps in message (header) time, waits in arrival time."""
 
-    slop_s: float = 0.017            # max stamp distance from the pivot (≈ 0.5 / fps)
-    max_wait_s: float = 0.1          # message time to wait for missing cameras
+    slop_s: float = 0.0              # max stamp distance from the set pivot [s]; 0 = half the
+    #                                  observed frame period (a wider value is narrowed to it)
+    max_wait_s: float = 0.1          # arrival time [s] a set waits for missing cameras after
+    #                                  its first message arrived (covers inference skew)
     min_views: int = 2               # partial sets with fewer cameras are dropped
-    max_queue: int = 30              # per-camera buffer bound (messages)
-    backward_jump_s: float = 0.5     # a camera's stamps going back this much resets everything
+    max_queue: int = 30              # buffered messages per camera; beyond, the oldest set is
+    #                                  decided at once (counted as overflow)
+    jump_s: float = 0.5              # a stamp this far [s] from the stream time is an outlier
+    jump_confirm: int = 3            # consecutive outliers per camera, on >= 2 cameras, that
+    #                                  make a sustained jump (reset; e.g. a bag loop)
     stats_window: int = 100          # used messages kept per camera for offset / jitter
 
     def validate(self) -> None:
@@ -67,8 +94,10 @@ class SyncConfig:
             raise ValueError(f'sync min_views must be >= 1, got {self.min_views}')
         if self.max_queue < 1:
             raise ValueError(f'sync max_queue must be >= 1, got {self.max_queue}')
-        if not self.backward_jump_s > 0.0:
-            raise ValueError(f'sync backward_jump_s must be > 0, got {self.backward_jump_s}')
+        if not (math.isfinite(self.jump_s) and self.jump_s > 0.0):
+            raise ValueError(f'sync jump_s must be > 0, got {self.jump_s}')
+        if self.jump_confirm < 1:
+            raise ValueError(f'sync jump_confirm must be >= 1, got {self.jump_confirm}')
         if self.stats_window < 1:
             raise ValueError(f'sync stats_window must be >= 1, got {self.stats_window}')
 
@@ -99,8 +128,9 @@ class AddResult:
 
     sets: List[SyncedSet] = field(default_factory=list)
     accepted: bool = True
-    reason: str = ''                 # why the message was rejected ('' when accepted)
-    reset: bool = False              # the synchroniser was reset before adding the message
+    reason: str = ''                 # why the message was not accepted ('' when accepted)
+    kind: str = ''                   # 'late' or 'outlier' when not accepted
+    reset: bool = False              # a sustained jump reset the synchroniser
 
 
 @dataclass
@@ -109,11 +139,18 @@ class CameraSyncStats:
 
     received: int = 0                # messages passed to ``add``
     used: int = 0                    # messages emitted in a set
-    dropped: int = 0                 # messages discarded unused (all reasons, incl. late)
-    late: int = 0                    # ... of which arrived after their set was emitted
+    dropped: int = 0                 # messages discarded unused (all reasons)
+    late: int = 0                    # ... arrived after their set was decided
+    outliers: int = 0                # ... isolated outlier stamps
     missing: int = 0                 # emitted sets without this camera
+    lost: int = 0                    # frames missing from the stamp sequence (upstream loss)
     latest_stamp_ns: Optional[int] = None
+    last_arrival_ns: Optional[int] = None
+    period_ns: Optional[int] = None          # median of the recent stamp steps
+    usual_period_ns: Optional[int] = None    # shortest sustained period seen (usual rate)
     offsets_ns: Deque[int] = field(default_factory=deque)  # stamp - set stamp, recent used
+    steps_ns: Deque[int] = field(default_factory=lambda: deque(maxlen=PERIOD_WINDOW))
+    unmatched: Counter = field(default_factory=Counter)   # decided unused: reason -> count
 
     @property
     def offset_mean_s(self) -> float:
@@ -131,11 +168,39 @@ class CameraSyncStats:
         mean = sum(self.offsets_ns) / n
         return math.sqrt(sum((o - mean) ** 2 for o in self.offsets_ns) / n) / NS_PER_S
 
+    @property
+    def rate_hz(self) -> float:
+        """Recent frame rate from the stamps (NaN until known)."""
+        return NS_PER_S / self.period_ns if self.period_ns else math.nan
+
+    @property
+    def usual_rate_hz(self) -> float:
+        """Highest sustained frame rate seen from the stamps (NaN until known)."""
+        return NS_PER_S / self.usual_period_ns if self.usual_period_ns else math.nan
+
+    def observe_step(self, stamp_ns: int) -> None:
+        """Update period, usual period and upstream losses with a stamp newer than the last."""
+        if self.latest_stamp_ns is None or stamp_ns <= self.latest_stamp_ns:
+            return
+        step = stamp_ns - self.latest_stamp_ns
+        if self.usual_period_ns and step > 1.5 * self.usual_period_ns:
+            self.lost += int(round(step / self.usual_period_ns)) - 1
+        self.steps_ns.append(step)
+        if len(self.steps_ns) >= PERIOD_MIN_STEPS:
+            self.period_ns = int(statistics.median(self.steps_ns))
+            if len(self.steps_ns) == PERIOD_WINDOW and (
+                    self.usual_period_ns is None or self.period_ns < self.usual_period_ns):
+                self.usual_period_ns = self.period_ns
+
+
+Entry = Tuple[int, int, int, Any]    # (stamp_ns, sequence, arrival_ns, message)
+
 
 class StreamSynchronizer:
     """Group messages of N camera streams into sets by header stamp (see module docstring)."""
 
-    def __init__(self, camera_ids: Sequence[str], config: Optional[SyncConfig] = None) -> None:
+    def __init__(self, camera_ids: Sequence[str], config: Optional[SyncConfig] = None,
+                 clock: Any = time.monotonic_ns) -> None:
         self.config = config or SyncConfig()
         self.config.validate()
         ids = list(camera_ids)
@@ -144,29 +209,41 @@ class StreamSynchronizer:
         if len(set(ids)) != len(ids):
             raise ValueError(f'duplicate camera ids in {ids}')
         self.camera_ids: Tuple[str, ...] = tuple(ids)
-        self._slop = int(round(self.config.slop_s * NS_PER_S))
+        self._clock = clock                          # arrival clock when add() gets no now_ns
+        self._slop_cfg = int(round(self.config.slop_s * NS_PER_S))
         self._max_wait = int(round(self.config.max_wait_s * NS_PER_S))
-        self._jump = int(round(self.config.backward_jump_s * NS_PER_S))
+        self._jump = int(round(self.config.jump_s * NS_PER_S))
         self._seq = itertools.count()
-        # Per camera, a list of (stamp_ns, seq, message) sorted by stamp.
-        self._buffers: Dict[str, List[Tuple[int, int, Any]]] = {c: [] for c in ids}
+        # Per camera, entries sorted by stamp; outliers held aside per camera.
+        self._buffers: Dict[str, List[Entry]] = {c: [] for c in ids}
+        self._suspects: Dict[str, List[Entry]] = {c: [] for c in ids}
         self.stats: Dict[str, CameraSyncStats] = {
             c: CameraSyncStats(offsets_ns=deque(maxlen=self.config.stats_window)) for c in ids}
         self.last_emitted_ns: Optional[int] = None   # pivot of the last emitted set
         self._consumed_ns: Optional[int] = None      # stamps <= this are decided (emit/drop)
+        self._ref: Optional[Tuple[int, int]] = None  # newest accepted stamp, its arrival
+        self._first_arrival_ns: Optional[int] = None
+        self._last_accepted_arrival: Dict[str, Optional[int]] = dict.fromkeys(ids)
+        self.slop_ns = self._slop_cfg or int(INITIAL_SLOP_S * NS_PER_S)
+        self.frame_period_ns: Optional[int] = None   # shortest camera period seen now
+        self.slop_note = ''                          # set once when slop_s had to be narrowed
         self.sets_emitted = 0
         self.partial_sets = 0
-        self.pivots_dropped = 0                      # expired pivots with < min_views cameras
+        self.pivots_dropped = 0                      # decided pivots with < min_views cameras
+        self.overflow_decisions = 0                  # pivots decided early: a queue was full
+        self.decisions: Counter = Counter()          # why incomplete sets were decided
         self.resets = 0
 
     # --- public API ------------------------------------------------------------------------
 
-    def add(self, camera_id: str, stamp_ns: int, msg: Any) -> AddResult:
+    def add(self, camera_id: str, stamp_ns: int, msg: Any,
+            now_ns: Optional[int] = None) -> AddResult:
         """
-        Buffer one message; return the sets it completed (oldest first).
+        Buffer one message that arrived at ``now_ns``; return the sets it let go (oldest first).
 
-        Raises ``ValueError`` for an unknown camera id or a non-positive stamp: callers
-        validate those first (they are configuration or driver errors, not timing).
+        ``now_ns`` is the arrival time on a monotonic clock (default: the constructor's
+        ``clock``). Raises ``ValueError`` for an unknown camera id or a non-positive stamp:
+        callers validate those first (they are configuration or driver errors, not timing).
         """
         if camera_id not in self._buffers:
             raise ValueError(f'unknown camera id {camera_id!r} (configured: '
@@ -174,49 +251,60 @@ class StreamSynchronizer:
         stamp_ns = int(stamp_ns)
         if stamp_ns <= 0:
             raise ValueError(f'camera {camera_id!r}: stamp must be > 0, got {stamp_ns} ns')
-        result = AddResult()
+        now = int(self._clock() if now_ns is None else now_ns)
         stats = self.stats[camera_id]
-        if stats.latest_stamp_ns is not None and stamp_ns < stats.latest_stamp_ns - self._jump:
-            back = (stats.latest_stamp_ns - stamp_ns) / NS_PER_S
-            self.reset()
-            result.reset = True
-            result.reason = (f'camera {camera_id!r}: stamp jumped back {back:.3f} s; '
-                             f'synchroniser reset')
         stats.received += 1
-        if self._consumed_ns is not None and stamp_ns <= self._consumed_ns:
+        stats.last_arrival_ns = now
+        if self._first_arrival_ns is None:
+            self._first_arrival_ns = now
+        entry = (stamp_ns, next(self._seq), now, msg)
+        off = self._outlier_offset(stamp_ns, now)
+        if off is None:
+            self._drop_suspects(camera_id)           # earlier outliers were isolated glitches
+            return self._accept(camera_id, entry, now)
+        held = self._suspects[camera_id]
+        held.append(entry)
+        if len(held) > self.config.max_queue:
+            held.pop(0)
             stats.dropped += 1
-            stats.late += 1
-            result.accepted = False
-            result.reason = (f'camera {camera_id!r}: stamp {stamp_ns / NS_PER_S:.6f} s arrived '
-                             f'after its set was decided (sets up to '
-                             f'{self._consumed_ns / NS_PER_S:.6f} s are emitted or dropped)')
-            return result
-        if stats.latest_stamp_ns is None or stamp_ns > stats.latest_stamp_ns:
-            stats.latest_stamp_ns = stamp_ns
-        buf = self._buffers[camera_id]
-        insort(buf, (stamp_ns, next(self._seq), msg), key=lambda e: e[0])
-        if len(buf) > self.config.max_queue:
-            buf.pop(0)
-            stats.dropped += 1
-        result.sets = self._process(self._horizon())
-        return result
+            stats.outliers += 1
+        group = self._sustained_jump()
+        if group:
+            return self._restart(group, camera_id, stamp_ns, off, now)
+        return AddResult(accepted=False, kind='outlier', reason=(
+            f'camera {camera_id!r}: stamp {stamp_ns / NS_PER_S:.6f} s is {off / NS_PER_S:+.3f}'
+            f' s from the stream time of the other messages (limit sync.jump_s '
+            f'{self.config.jump_s:g} s); held aside and dropped unless it starts a sustained '
+            f'jump on at least {self._jump_cameras()} cameras (check the camera clocks)'))
+
+    def poll(self, now_ns: Optional[int] = None) -> List[SyncedSet]:
+        """Decide the sets whose wait has run out at ``now_ns`` (call it on a timer)."""
+        return self._process(int(self._clock() if now_ns is None else now_ns))
 
     def flush(self) -> List[SyncedSet]:
         """Emit every buffered set that has ``min_views`` cameras (end of stream)."""
-        return self._process(None)
+        return self._process(0, flush=True)
+
+    def decide_through(self, stamp_ns: int) -> None:
+        """Treat every stamp up to ``stamp_ns`` as decided (later arrivals are 'late')."""
+        if self._consumed_ns is None or stamp_ns > self._consumed_ns:
+            self._drop_through(int(stamp_ns), 'late')
 
     def reset(self) -> None:
-        """Clear buffers and the emitted-set memory; counters are kept (they are totals)."""
-        for cam, buf in self._buffers.items():
-            self.stats[cam].dropped += len(buf)
-            buf.clear()
-            self.stats[cam].latest_stamp_ns = None
+        """Clear buffers, held outliers and the decided-set memory; counters are kept."""
+        for cam in self.camera_ids:
+            st = self.stats[cam]
+            st.dropped += len(self._buffers[cam])
+            self._buffers[cam].clear()
+            self._drop_suspects(cam)
+            st.latest_stamp_ns = None
         self.last_emitted_ns = None
         self._consumed_ns = None
+        self._ref = None
         self.resets += 1
 
     def pending(self) -> int:
-        """Return the number of buffered messages over all cameras."""
+        """Return the number of buffered messages over all cameras (outliers excluded)."""
         return sum(len(b) for b in self._buffers.values())
 
     def oldest_pending_ns(self) -> Optional[int]:
@@ -224,47 +312,174 @@ class StreamSynchronizer:
         heads = [b[0][0] for b in self._buffers.values() if b]
         return min(heads) if heads else None
 
+    @property
+    def held_outliers(self) -> int:
+        """Return the number of outlier messages held aside now."""
+        return sum(len(s) for s in self._suspects.values())
+
     # --- internals -------------------------------------------------------------------------
 
-    def _horizon(self) -> Optional[int]:
-        latest = sorted((s.latest_stamp_ns for s in self.stats.values()
-                         if s.latest_stamp_ns is not None), reverse=True)
-        if not latest:
-            return None
-        k = min(len(latest), 2, self.config.min_views)
-        return latest[k - 1]
+    def _jump_cameras(self) -> int:
+        return min(2, len(self.camera_ids))
 
-    def _candidates(self, pivot: int) -> Dict[str, int]:
-        """Return camera -> index of its message nearest ``pivot`` within the slop window."""
+    def _outlier_offset(self, stamp_ns: int, now: int) -> Optional[int]:
+        """Return how far ``stamp_ns`` is from the stream time if beyond ``jump_s``, else None."""
+        if self._ref is None:
+            return None
+        ref_stamp, ref_arrival = self._ref
+        ahead = stamp_ns - (ref_stamp + max(0, now - ref_arrival))
+        if ahead > self._jump:
+            return ahead
+        if stamp_ns < ref_stamp - self._jump:
+            return stamp_ns - ref_stamp
+        return None
+
+    def _drop_suspects(self, cam: str) -> None:
+        held = self._suspects[cam]
+        if held:
+            self.stats[cam].dropped += len(held)
+            self.stats[cam].outliers += len(held)
+            held.clear()
+
+    def _sustained_jump(self) -> List[str]:
+        """Cameras whose held outliers agree on a new timeline (empty: no sustained jump)."""
+        cams = [c for c in self.camera_ids
+                if len(self._suspects[c]) >= self.config.jump_confirm]
+        need = self._jump_cameras()
+        if len(cams) < need:
+            return []
+        newest = {c: max(e[0] for e in self._suspects[c]) for c in cams}
+        for c in cams:
+            group = [d for d in cams if abs(newest[d] - newest[c]) <= self._jump]
+            if len(group) >= need:
+                return group
+        return []
+
+    def _restart(self, group: List[str], cam: str, stamp_ns: int, off: int,
+                 now: int) -> AddResult:
+        """Reset on a sustained jump and replay the held messages (the group's first)."""
+        held = {c: list(self._suspects[c]) for c in self.camera_ids}
+        for c in self.camera_ids:
+            self._suspects[c].clear()
+        self.reset()
+        result = AddResult(reset=True, reason=(
+            f'stamps of cameras {", ".join(group)} jumped {off / NS_PER_S:+.3f} s for '
+            f'{self.config.jump_confirm}+ messages each (bag loop, driver restart or clock '
+            f'step); synchroniser reset'))
+        order = sorted((e for c in group for e in ((c, x) for x in held[c])),
+                       key=lambda ce: ce[1][1])
+        order += sorted((e for c in self.camera_ids if c not in group
+                         for e in ((c, x) for x in held[c])), key=lambda ce: ce[1][1])
+        for c, entry in order:
+            off_c = self._outlier_offset(entry[0], now)
+            if off_c is None:
+                result.sets.extend(self._accept(c, entry, now).sets)
+            else:
+                self._suspects[c].append(entry)
+        return result
+
+    def _accept(self, cam: str, entry: Entry, now: int) -> AddResult:
+        stamp_ns = entry[0]
+        stats = self.stats[cam]
+        self._last_accepted_arrival[cam] = entry[2]
+        stats.observe_step(stamp_ns)
+        if stats.latest_stamp_ns is None or stamp_ns > stats.latest_stamp_ns:
+            stats.latest_stamp_ns = stamp_ns
+        self._update_slop()
+        if self._consumed_ns is not None and stamp_ns <= self._consumed_ns:
+            stats.dropped += 1
+            stats.late += 1
+            return AddResult(accepted=False, kind='late', reason=(
+                f'camera {cam!r}: stamp {stamp_ns / NS_PER_S:.6f} s arrived after its set was '
+                f'decided (sets up to {self._consumed_ns / NS_PER_S:.6f} s are emitted or '
+                f'dropped; a camera this late needs a longer sync.max_wait_s)'))
+        if self._ref is None or stamp_ns > self._ref[0]:
+            self._ref = (stamp_ns, entry[2])
+        insort(self._buffers[cam], entry, key=lambda e: e[0])
+        return AddResult(sets=self._process(now))
+
+    def _update_slop(self) -> None:
+        periods = [(s.period_ns, c) for c, s in self.stats.items() if s.period_ns]
+        if not periods:
+            return
+        period, cam = min(periods)
+        self.frame_period_ns = period
+        half = period // 2
+        if not self._slop_cfg:
+            self.slop_ns = half
+            return
+        self.slop_ns = min(self._slop_cfg, half)
+        if self._slop_cfg > half and not self.slop_note:
+            self.slop_note = (
+                f'sync.slop_s {self.config.slop_s:g} s is wider than half the observed frame '
+                f'period ({period / 1e6:.1f} ms = {NS_PER_S / period:.1f} Hz, camera {cam}): '
+                f'using {half / NS_PER_S:.4f} s so consecutive frames of a camera do not merge '
+                f'(set sync.slop_s to 0 to follow the frame rate)')
+
+    def _candidates(self, pivot: int) -> Tuple[Dict[str, int], int]:
+        """Return camera -> index of its message nearest ``pivot`` and their first arrival."""
         chosen = {}
-        hi = pivot + self._slop
+        first = None
+        hi = pivot + self.slop_ns
         for cam, buf in self._buffers.items():
             best = None
-            for i, (stamp, _, _) in enumerate(buf):
+            for i, (stamp, _, _, _) in enumerate(buf):
                 if stamp > hi:
                     break
-                if stamp >= pivot and (best is None or stamp - pivot < buf[best][0] - pivot):
+                if stamp >= pivot and (best is None or stamp < buf[best][0]):
                     best = i
             if best is not None:
                 chosen[cam] = best
-        return chosen
+                arrival = buf[best][2]
+                first = arrival if first is None else min(first, arrival)
+        return chosen, first if first is not None else 0
 
-    def _process(self, horizon: Optional[int]) -> List[SyncedSet]:
-        """Emit or drop pivots while possible; ``horizon`` None means flush everything."""
+    def _may_still_come(self, chosen: Dict[str, int], pivot: int, now: int) -> bool:
+        """Whether a camera missing from the pivot's set can still send a message for it."""
+        hi = pivot + self.slop_ns
+        for cam in self.camera_ids:
+            if cam in chosen:
+                continue
+            st = self.stats[cam]
+            last_arrival = self._last_accepted_arrival[cam]
+            if last_arrival is None:                 # nothing usable yet: silent since start
+                last_arrival = self._first_arrival_ns
+            period = st.period_ns or 0
+            tol = min(period // 4, self.slop_ns // 2)
+            latest = st.latest_stamp_ns
+            if latest is not None and latest > hi and (
+                    not period or latest - period > hi or latest - period + tol < pivot):
+                continue        # it sent a later frame, and the one before that is not ours
+            if now - last_arrival > self._max_wait + period:
+                continue                             # silent
+            if period and latest is not None and latest < pivot and \
+                    latest + period - tol > hi:
+                continue                             # its next frame falls after the window
+            return True
+        return False
+
+    def _process(self, now: int, flush: bool = False) -> List[SyncedSet]:
+        """Emit or drop pivots while they are decided; ``flush`` decides everything."""
         out = []
         while True:
             pivot = self.oldest_pending_ns()
             if pivot is None:
                 return out
-            chosen = self._candidates(pivot)
-            complete = len(chosen) == len(self.camera_ids)
-            expired = horizon is None or horizon > pivot + self._max_wait
-            if not (complete or expired):
-                return out
+            chosen, first_arrival = self._candidates(pivot)
+            if len(chosen) < len(self.camera_ids) and not flush:
+                if any(len(b) > self.config.max_queue for b in self._buffers.values()):
+                    self.overflow_decisions += 1
+                    self.decisions['queue full'] += 1
+                elif now - first_arrival >= self._max_wait:
+                    self.decisions['waited max_wait'] += 1
+                elif self._may_still_come(chosen, pivot, now):
+                    return out
+                else:
+                    self.decisions['no camera can still come'] += 1
             if len(chosen) >= self.config.min_views:
                 out.append(self._emit(pivot, chosen))
             else:
-                self._drop_through(pivot + self._slop)
+                self._drop_through(pivot + self.slop_ns, 'too_few_views')
                 self.pivots_dropped += 1
 
     def _emit(self, pivot: int, chosen: Dict[str, int]) -> SyncedSet:
@@ -281,15 +496,15 @@ class StreamSynchronizer:
                 st.offsets_ns.append(stamps[cam] - stamp)
             else:
                 st.missing += 1
-        self._drop_through(pivot + self._slop)
+        self._drop_through(pivot + self.slop_ns, 'duplicates')
         self.last_emitted_ns = pivot
         self.sets_emitted += 1
         if missing:
             self.partial_sets += 1
-        return SyncedSet(stamp_ns=stamp, messages={c: e[2] for c, e in members.items()},
+        return SyncedSet(stamp_ns=stamp, messages={c: e[3] for c, e in members.items()},
                          stamps_ns=stamps, missing=missing)
 
-    def _drop_through(self, limit_ns: int) -> None:
+    def _drop_through(self, limit_ns: int, reason: str) -> None:
         """Drop (and count) buffered messages with stamp <= ``limit_ns``; later ones are late."""
         self._consumed_ns = limit_ns
         for cam, buf in self._buffers.items():
@@ -298,12 +513,19 @@ class StreamSynchronizer:
                 n += 1
             if n:
                 del buf[:n]
-                self.stats[cam].dropped += n
+                st = self.stats[cam]
+                st.dropped += n
+                st.unmatched[reason] += n
 
 
 def summarize(stats: Dict[str, CameraSyncStats], cameras: Iterable[str]) -> Dict[str, dict]:
     """Return plain-dict statistics per camera (for logs and diagnostics)."""
     return {c: {'received': stats[c].received, 'used': stats[c].used,
                 'dropped': stats[c].dropped, 'late': stats[c].late,
-                'missing': stats[c].missing, 'offset_mean_s': stats[c].offset_mean_s,
-                'offset_jitter_s': stats[c].offset_jitter_s} for c in cameras}
+                'outliers': stats[c].outliers, 'lost upstream': stats[c].lost,
+                'missing': stats[c].missing, 'rate_hz': stats[c].rate_hz,
+                'usual_rate_hz': stats[c].usual_rate_hz,
+                'offset_mean_s': stats[c].offset_mean_s,
+                'offset_jitter_s': stats[c].offset_jitter_s,
+                **{f'dropped: {k}': n for k, n in sorted(stats[c].unmatched.items())}}
+            for c in cameras}

@@ -40,7 +40,7 @@ from typing import Any, Dict, List, Optional, Union
 
 from geometry_msgs.msg import PoseArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.fusion import Fusion, FusionConfig
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout, LAYOUT_NAMES
@@ -62,7 +62,7 @@ from mv3dpose_ros.ros.tf import TfBridge, TfError
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
-from rclpy.clock import JumpThreshold
+from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -73,7 +73,15 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 NS_PER_S = 1_000_000_000
-SYNC_FIELDS = ('slop_s', 'max_wait_s', 'min_views', 'max_queue', 'backward_jump_s')
+#: Period [s] of the steady-clock timer that lets sets whose wait ran out go (core.sync.poll).
+POLL_PERIOD_S = 0.01
+#: Period [s] of the empty steps that age the tracks once no input set arrives.
+IDLE_STEP_S = 0.1
+
+
+def steady_ns() -> int:
+    """Return the steady (monotonic) clock in nanoseconds: waits, throttles and durations."""
+    return time.monotonic_ns()
 
 
 class ConfigError(ValueError):
@@ -90,6 +98,7 @@ class _Camera:
         self.accepted = 0
         self.rejected: Counter = Counter()     # reason -> count (never reset)
         self.rejected_reported: Counter = Counter()   # snapshot at the last diagnostics cycle
+        self.lost_reported = 0                 # sync stats' upstream losses at the last cycle
         self.freq = FrequencyStats()
         self.stamps = TimestampStats()
         self.last_rx_ns: Optional[int] = None
@@ -135,7 +144,12 @@ class FusionNode(Node):
         except TfError as exc:
             raise ConfigError(str(exc)) from exc
         self.headings = Headings(self.layout)
+        # Throttling, waits and durations run on the steady clock: a stalled /clock must not
+        # silence the node (core.sync waits on it too).
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._rlog = RateLimitedLog(self.get_logger().warning, self.log_throttle_s)
+        for problem in self.config_warnings:
+            self.get_logger().warning(problem)
         self._log_handler = _RosLogHandler(self)
         logging.getLogger('mv3dpose_ros').addHandler(self._log_handler)
 
@@ -147,10 +161,15 @@ class FusionNode(Node):
         self.poses_pub = self._publisher(PoseArray, '~/poses', reliable_qos(10))
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset_request)
 
-        self.sync = StreamSynchronizer(self.camera_ids, self.sync_config)
+        self.sync = StreamSynchronizer(self.camera_ids, self.sync_config, clock=steady_ns)
         self.fusion: Optional[Fusion] = None
         self.cams: Dict[str, _Camera] = {}
-        self._start_ns = self._now_ns()
+        self._start_ns = steady_ns()
+        self._slop_note_logged = False
+        self._last_set_node_ns: Optional[int] = None   # node clock when the last set came
+        self._last_set_anchor_ns = 0                     # stamp of the last real set
+        self._drops_reported: Dict[str, int] = {}
+        self._clock_seen = (self._now_ns(), steady_ns())   # node clock value, steady at change
         self._published_ids: set = set()
         self.latency = WindowStats()
         self.processing = WindowStats()
@@ -186,7 +205,8 @@ class FusionNode(Node):
         self.diagnostics = Diagnostics(self, self.diagnostics_period_s)
         self.diagnostics.add_task(self._diag_inputs)
         self.diagnostics.add_task(self._diag_pipeline)
-        self._flush_timer = self.create_timer(0.1, self._idle_flush)
+        self._poll_timer = self.create_timer(POLL_PERIOD_S, self._poll, clock=self._steady)
+        self._idle_timer = self.create_timer(IDLE_STEP_S, self._idle_step, clock=self._steady)
         self._jump_handle = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(seconds=-0.5),
                           on_clock_change=False),
@@ -197,7 +217,7 @@ class FusionNode(Node):
             f'fusing {len(self.camera_ids)} cameras {list(self.camera_ids)} from '
             f'{self.rig_path} (layout {self.layout.name}, world frame {self.world_frame!r}, '
             f'use_sim_time {self.get_parameter("use_sim_time").value}); sync slop '
-            f'{self.sync_config.slop_s * 1e3:.1f} ms, max_wait '
+            f'{self.sync_config.slop_s * 1e3:.1f} ms (0 = half the frame period), max_wait '
             f'{self.sync_config.max_wait_s * 1e3:.0f} ms, min_views '
             f'{self.sync_config.min_views}')
 
@@ -219,27 +239,18 @@ class FusionNode(Node):
         d(self, 'layout', 'coco17', 'Skeleton layout fused and published '
           f'({", ".join(LAYOUT_NAMES)}); inputs of another known layout are converted',
           read_only=True)
-        d(self, 'world_frame', 'map', "frame_id of tracks and markers (the rig's world, z up)",
-          read_only=True)
+        d(self, 'world_frame', '', "frame_id of tracks and markers (the rig's world, z up); "
+          "empty = the rig file's world_frame, else 'map'", read_only=True)
         d(self, 'intrinsics_source', 'rig', 'rig: intrinsics from rig_config; camera_info: '
           'from the first CameraInfo of each camera (extrinsics stay from the rig)',
           read_only=True)
         d(self, 'camera_info_topic', '/{camera}/camera_info',
           'CameraInfo topic per camera when intrinsics_source is camera_info', read_only=True)
-        sync_help = {
-            'slop_s': "Max stamp distance [s] of a camera's message from the set pivot "
-                      '(about 0.5 / fps)',
-            'max_wait_s': 'Message time [s] to wait for missing cameras before emitting a '
-                          'partial set',
-            'min_views': 'Partial sets with fewer cameras are dropped',
-            'max_queue': 'Buffered messages per camera (oldest dropped beyond)',
-            'backward_jump_s': "A camera's stamps going back by more than this [s] resets "
-                               'the synchroniser and the tracks (bag loop)'}
-        defaults = SyncConfig()
-        for name in SYNC_FIELDS:
-            d(self, f'sync.{name}', getattr(defaults, name), sync_help[name], read_only=True)
-        d(self, 'sync.idle_flush_s', 0.5, 'Emit pending sets once no input arrived for this '
-          'long [s] of node time (end of a stream); 0 disables', read_only=True)
+        P.declare_dataclass(self, SyncConfig, 'sync', read_only=True)
+        d(self, 'limits.max_persons', 50, 'Inputs with more persons are dropped and counted '
+          '(too_many_persons), never clipped: bounds the work per set', read_only=True)
+        d(self, 'limits.max_message_bytes', 1_000_000, 'Inputs larger than this [bytes] are '
+          'dropped and counted (too_large) before decoding', read_only=True)
         P.declare_dataclass(self, FusionConfig, 'fusion', read_only=True)
         d(self, 'publish_tentative', False, 'Also publish TENTATIVE (unconfirmed) tracks',
           dynamic=True)
@@ -249,7 +260,9 @@ class FusionNode(Node):
           'reason', read_only=True)
         d(self, 'diagnostics.period_s', 1.0, 'Period [s] of /diagnostics', read_only=True)
         d(self, 'diagnostics.silent_warn_s', 2.0, 'WARN when a camera sent nothing for this '
-          'long [s] of node time', dynamic=True)
+          'long [s] (steady clock)', dynamic=True)
+        d(self, 'diagnostics.clock_stall_s', 2.0, 'Under use_sim_time, ERROR when /clock did '
+          'not advance for this long [s] (steady clock)', dynamic=True)
         d(self, 'diagnostics.expected_rate_hz', 0.0, 'Expected input rate per camera [Hz] for '
           'the frequency check; 0 = no check', dynamic=True)
         mo = MarkerOptions()
@@ -271,6 +284,7 @@ class FusionNode(Node):
 
     def _read_parameters(self) -> None:
         v = self._value
+        self.config_warnings = P.unknown_parameter_warnings(self)
         self.rig_path = P.resolve_path(v('rig_config'), P.package_search_dirs())
         if not v('rig_config'):
             raise ConfigError('parameter rig_config is empty: set it to the rig calibration '
@@ -280,8 +294,10 @@ class FusionNode(Node):
                               f'{self.rig_path!r})')
         try:
             self.rig: Dict[str, Camera] = load_calibration(self.rig_path)
+            rig_frame, rig_problems = rig_metadata(self.rig_path)
         except (CalibrationError, OSError, ValueError) as exc:
             raise ConfigError(f'cannot load rig_config: {exc}') from exc
+        self.config_warnings += rig_problems
         ids = [c for c in (v('camera_ids') or []) if c]
         if not ids:
             ids = list(self.rig)
@@ -305,17 +321,14 @@ class FusionNode(Node):
             sensor_qos(self.input_reliability, self.input_depth)
         except ValueError as exc:
             raise ConfigError(f'input QoS: {exc}') from exc
-        self.world_frame = v('world_frame')
+        self.world_frame = v('world_frame') or rig_frame or 'map'
         self.intrinsics_source = v('intrinsics_source')
         if self.intrinsics_source not in ('rig', 'camera_info'):
             raise ConfigError(f'intrinsics_source must be rig or camera_info, got '
                               f'{self.intrinsics_source!r}')
         self.camera_info_topic = v('camera_info_topic')
         try:
-            self.sync_config = SyncConfig(**{n: v(f'sync.{n}') for n in SYNC_FIELDS})
-            self.sync_config.slop_s = float(self.sync_config.slop_s)
-            self.sync_config.max_wait_s = float(self.sync_config.max_wait_s)
-            self.sync_config.backward_jump_s = float(self.sync_config.backward_jump_s)
+            self.sync_config = P.build_dataclass(self, SyncConfig, 'sync')
             self.sync_config.validate()
             self.fusion_config = P.build_dataclass(self, FusionConfig, 'fusion')
             self.fusion_config.validate()
@@ -324,7 +337,11 @@ class FusionNode(Node):
         if len(ids) < max(2, self.fusion_config.min_views):
             raise ConfigError(f'{len(ids)} camera(s) {ids}: fusion needs at least '
                               f'{max(2, self.fusion_config.min_views)}')
-        self.idle_flush_s = float(v('sync.idle_flush_s'))
+        self.max_persons = int(v('limits.max_persons'))
+        self.max_message_bytes = int(v('limits.max_message_bytes'))
+        if self.max_persons < 1 or self.max_message_bytes < 64:
+            raise ConfigError(f'limits.max_persons ({self.max_persons}) must be >= 1 and '
+                              f'limits.max_message_bytes ({self.max_message_bytes}) >= 64')
         self.max_future_ns = int(float(v('input_max_future_s')) * NS_PER_S)
         self.log_throttle_s = float(v('log_throttle_s'))
         self.diagnostics_period_s = float(v('diagnostics.period_s'))
@@ -334,6 +351,7 @@ class FusionNode(Node):
         v = self._value
         self.publish_tentative = bool(v('publish_tentative'))
         self.silent_warn_ns = int(float(v('diagnostics.silent_warn_s')) * NS_PER_S)
+        self.clock_stall_ns = int(float(v('diagnostics.clock_stall_s')) * NS_PER_S)
         self.expected_rate_hz = float(v('diagnostics.expected_rate_hz'))
         self.markers_enabled = bool(v('markers.enabled'))
         self.marker_options = MarkerOptions(
@@ -402,7 +420,7 @@ class FusionNode(Node):
                 state.info_problem = f'CameraInfo rejected: {exc}'
                 self._rlog(f'{cam}:camera_info', f'camera {cam}: CameraInfo on '
                            f'{self.resolve_topic_name(camera_topic(self.camera_info_topic, cam))}'
-                           f' rejected: {exc}', self._now_ns())
+                           f' rejected: {exc}')
                 return
             rig_cam = self.rig[cam]
             if (camera.width, camera.height) != (rig_cam.width, rig_cam.height):
@@ -420,10 +438,10 @@ class FusionNode(Node):
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
-    def _reject(self, state: _Camera, reason: str, text: str, now_ns: int) -> None:
+    def _reject(self, state: _Camera, reason: str, text: str, now_ns: int = 0) -> None:
         state.rejected[reason] += 1
         self._rlog(f'{state.name}:{reason}', f'dropped Person2DArray of camera {state.name} '
-                   f'on {state.topic}: {text}', now_ns)
+                   f'on {state.topic}: {text}')
 
     def _decode(self, state: _Camera, data: bytes) -> Union[Persons2D, Person2DArray]:
         """Decode raw CDR (InvalidMessage 'malformed' for bytes rclpy would refuse too)."""
@@ -455,6 +473,10 @@ class FusionNode(Node):
             state.size_problem = problem
             return None, ('image_size', problem)
         state.size_problem = ''
+        persons = len(msg.counts) if isinstance(msg, Persons2D) else len(msg.persons)
+        if persons > self.max_persons:
+            return None, ('too_many_persons', f'{persons} persons > limits.max_persons '
+                          f'{self.max_persons} (dropped whole, not clipped)')
         layout_name = msg.layout or self.layout.name
         try:
             src = get_layout(layout_name)
@@ -479,14 +501,19 @@ class FusionNode(Node):
         """Take one input: serialised CDR (the raw subscription) or a ``Person2DArray``."""
         with self._lock:
             now = self._now_ns()
+            arrival = steady_ns()
             state = self.cams[cam]
             state.received += 1
             state.freq.tick()
-            state.last_rx_ns = now
-            self._last_rx_any_ns = now
+            state.last_rx_ns = arrival
+            self._last_rx_any_ns = arrival
             if isinstance(msg, Person2DArray):
                 stamp_ns = stamp_to_ns(msg.header.stamp)
             else:
+                if len(msg) > self.max_message_bytes:
+                    self._reject(state, 'too_large', f'{len(msg)} bytes > '
+                                 f'limits.max_message_bytes {self.max_message_bytes}', now)
+                    return
                 try:
                     msg = self._decode(state, msg)
                 except InvalidMessage as exc:
@@ -504,26 +531,59 @@ class FusionNode(Node):
             if problem is not None:
                 self._reject(state, *problem, now)
                 return
-            result = self.sync.add(cam, stamp_ns, poses)
+            result = self.sync.add(cam, stamp_ns, poses, arrival)
             if result.reset:
                 self._reset(result.reason, from_sync=True)
-            if not result.accepted:
+            if result.kind == 'late':
                 self._reject(state, 'late', result.reason, now)
-                return
-            state.accepted += 1
+            elif result.kind == 'outlier':   # held; counted by the synchroniser when dropped
+                self._rlog(f'{cam}:outlier', f'Person2DArray of camera {cam} on {state.topic}: '
+                           f'{result.reason}')
+            if result.accepted:
+                state.accepted += 1
+            if self.sync.slop_note and not self._slop_note_logged:
+                self._slop_note_logged = True
+                self.get_logger().warning(self.sync.slop_note)
             for synced in result.sets:
                 self._process(synced)
 
-    def _idle_flush(self) -> None:
+    def _poll(self) -> None:
+        """Let the sets go whose wait for missing cameras ran out (steady clock)."""
         with self._lock:
-            if self.idle_flush_s <= 0 or self.sync.pending() == 0 or self.fusion is None:
+            if self.fusion is None or self.sync.pending() == 0:
                 return
-            now = self._now_ns()
-            if self._last_rx_any_ns is None or now - self._last_rx_any_ns < \
-                    self.idle_flush_s * NS_PER_S:
-                return
-            for synced in self.sync.flush():
+            for synced in self.sync.poll(steady_ns()):
                 self._process(synced)
+
+    def _idle_step(self) -> None:
+        """
+        Age the tracks while no input set arrives: empty steps, as the tracker would get them.
+
+        Once no set came for half of ``fusion.max_coast_s`` (and longer than the synchroniser
+        could wait), every IDLE_STEP_S the tracks step with no views at the last set's stamp
+        advanced by the node-clock time since (less that wait), so they go COASTING and are
+        DELETED after ``fusion.max_coast_s`` as with empty sets; a message stamped before that
+        time is then late. Under sim time a stalled /clock stops this too (and is reported in
+        /diagnostics).
+        """
+        with self._lock:
+            if self.fusion is None or not self.last_tracks or self._last_set_ns is None or \
+                    self._last_set_node_ns is None or self.sync.pending():
+                return
+            idle_ns = self._now_ns() - self._last_set_node_ns
+            # Frames captured up to (now - wait) would have arrived: the empty step stands for
+            # them. Stepping only starts after half of max_coast_s, so a hiccup of a publisher
+            # (or a replay slower than real time) does not turn its next frames late.
+            wait_ns = int(self.sync_config.max_wait_s * NS_PER_S) + \
+                (self.sync.frame_period_ns or int(IDLE_STEP_S * NS_PER_S))
+            if idle_ns <= max(wait_ns, int(self.fusion_config.max_coast_s * NS_PER_S / 2)):
+                return
+            stamp_ns = self._last_set_anchor_ns + idle_ns - wait_ns
+            if stamp_ns <= self._last_set_ns:
+                return
+            self.sync.decide_through(stamp_ns)
+            self.counts['idle_steps'] += 1
+            self._step({}, stamp_ns, idle=True)
 
     def _on_time_jump(self, jump: Any) -> None:
         with self._lock:
@@ -542,23 +602,31 @@ class FusionNode(Node):
         if tombs and self._last_set_ns is not None:
             self._publish(tombs, self._last_set_ns)
         self._last_set_ns = None
+        self._last_set_node_ns = None
 
     # ------------------------------------------------------------------ fusion and output
     def _process(self, synced: SyncedSet) -> None:
+        self._last_set_node_ns = self._now_ns()
+        self._last_set_anchor_ns = synced.stamp_ns
+        if self._step(synced.messages, synced.stamp_ns):
+            self.counts['sets'] += 1
+            if synced.missing:
+                self.counts['partial_sets'] += 1
+
+    def _step(self, views: Dict[str, Any], stamp_ns: int, idle: bool = False) -> bool:
+        """Run ``Fusion.step`` and publish; return False when the core failed (counted)."""
         t0 = time.perf_counter()
         try:
-            tracks = self.fusion.step(synced.messages, synced.stamp)
+            tracks = self.fusion.step(views, stamp_ns / NS_PER_S)
         except Exception as exc:  # noqa: B902 - a core failure must not stop the node
             self.counts['fusion_errors'] += 1
-            self._rlog('fusion_error', f'Fusion.step failed on the set at {synced.stamp:.6f} s '
-                       f'({exc!r}); tracks reset', self._now_ns())
+            self._rlog('fusion_error', f'Fusion.step failed on the set at '
+                       f'{stamp_ns / NS_PER_S:.6f} s ({exc!r}); tracks reset')
             self.fusion.reset()
             self._published_ids.clear()
-            return
-        self.processing.add(time.perf_counter() - t0)
-        self.counts['sets'] += 1
-        if synced.missing:
-            self.counts['partial_sets'] += 1
+            return False
+        if not idle:
+            self.processing.add(time.perf_counter() - t0)
         self.last_tracks = [t for t in tracks if t.state != TrackState.DELETED]
         out = []
         for t in tracks:
@@ -569,17 +637,19 @@ class FusionNode(Node):
             elif t.state != TrackState.TENTATIVE or self.publish_tentative:
                 self._published_ids.add(t.track_id)
                 out.append(t)
-        self._publish(out, synced.stamp_ns)
-        self._last_set_ns = synced.stamp_ns
+        self._publish(out, stamp_ns, latency=not idle)
+        self._last_set_ns = stamp_ns
+        return True
 
-    def _publish(self, tracks: List[Track], stamp_ns: int) -> None:
+    def _publish(self, tracks: List[Track], stamp_ns: int, latency: bool = True) -> None:
         header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)
         self.tracks_pub.publish(tracks_to_cdr(tracks, header, self.layout.name))
         yaws = self.headings.update(tracks)
         self.poses_pub.publish(root_pose_array(tracks, yaws, header))
         self.tf.publish_tracks(tracks, yaws, header)
         self.output_rate.tick()
-        self.latency.add((self._now_ns() - stamp_ns) / NS_PER_S)
+        if latency:
+            self.latency.add((self._now_ns() - stamp_ns) / NS_PER_S)
         if self.markers_enabled and self.markers_pub.get_subscription_count() > 0:
             self.markers_pub.publish(tracks_to_markers_cdr(tracks, self.layout.bones, header,
                                                            self.marker_options))
@@ -600,9 +670,17 @@ class FusionNode(Node):
         super().destroy_node()
 
     # ------------------------------------------------------------------ diagnostics
+    def _expected_rate_hz(self, cam: str) -> float:
+        """Rate a camera should deliver: its own usual rate, or the rig's if that is higher."""
+        usual = [r for r in (self.sync.stats[c].usual_rate_hz for c in self.camera_ids)
+                 if math.isfinite(r)]
+        own = self.sync.stats[cam].usual_rate_hz
+        rig = sorted(usual)[len(usual) // 2] if usual else math.nan
+        return max((r for r in (own, rig) if math.isfinite(r)), default=math.nan)
+
     def _diag_inputs(self) -> List[Any]:
         with self._lock:
-            now = self._now_ns()
+            now = steady_ns()
             out = []
             for cam in self.camera_ids:
                 st = self.cams[cam]
@@ -612,16 +690,25 @@ class FusionNode(Node):
                 rate.max_hz = self.expected_rate_hz if self.expected_rate_hz > 0 else math.inf
                 f_level, f_msg, values = rate.sample(now)
                 t_level, t_msg, t_values = st.stamps.sample()
+                expected = self._expected_rate_hz(cam)
                 values = {'topic': st.topic, **values, **t_values,
+                          'rate from stamps (Hz)': ss.rate_hz,
+                          'expected rate (Hz)': expected,
+                          'lost upstream (stamp gaps)': ss.lost,
                           'received': st.received, 'accepted': st.accepted,
                           'used in sets': ss.used, 'dropped by sync': ss.dropped,
-                          'late': ss.late, 'missing from sets': ss.missing,
+                          'late': ss.late, 'outlier stamps': ss.outliers,
+                          'missing from sets': ss.missing,
                           'offset mean (ms)': ss.offset_mean_s * 1e3,
                           'offset jitter (ms)': ss.offset_jitter_s * 1e3}
+                for reason, n in sorted(ss.unmatched.items()):
+                    values[f'dropped by sync: {reason}'] = n
                 for reason, n in sorted(st.rejected.items()):
                     values[f'rejected: {reason}'] = n
                 level, message = OK, 'receiving'
                 since = now - (st.last_rx_ns if st.last_rx_ns is not None else self._start_ns)
+                new_lost = ss.lost - st.lost_reported
+                st.lost_reported = ss.lost
                 if since > self.silent_warn_ns:
                     level = WARN
                     message = f'no input on {st.topic} for {since / NS_PER_S:.1f} s'
@@ -631,25 +718,54 @@ class FusionNode(Node):
                     level, message = t_level, t_msg
                 elif level_value(f_level) > level_value(OK) and self.expected_rate_hz > 0:
                     level, message = f_level, f_msg
+                elif ss.rate_hz < 0.75 * expected:
+                    level, message = WARN, (f'{ss.rate_hz:.1f} Hz from the stamps, below the '
+                                            f'usual {expected:.1f} Hz')
                 new = st.rejected - st.rejected_reported
                 st.rejected_reported = Counter(st.rejected)
                 if level == OK and new:
                     level = WARN
                     message = 'dropped ' + ', '.join(f'{n} {r}' for r, n in sorted(new.items()))
+                if level == OK and new_lost > 0:
+                    level = WARN
+                    message = (f'{new_lost} frames lost upstream (gaps in the stamps: '
+                               'publisher, network or DDS queue)')
                 out.append(make_status(self.diagnostics.name(f'{cam} input'), level, message,
                                        hardware_id=cam, values=values))
             return out
 
     def _diag_pipeline(self) -> List[Any]:
         with self._lock:
-            now = self._now_ns()
+            now = steady_ns()
             s = self.sync
+            stats = [s.stats[c] for c in self.camera_ids]
+            drops = {
+                'lost upstream (stamp gaps)': sum(x.lost for x in stats),
+                'dropped at input (validation)': sum(
+                    n for c in self.camera_ids for r, n in self.cams[c].rejected.items()
+                    if r != 'late'),
+                'dropped in sync: late': sum(x.late for x in stats),
+                'dropped in sync: outlier stamps': sum(x.outliers for x in stats),
+                'dropped in sync: too few views': sum(x.unmatched['too_few_views']
+                                                      for x in stats),
+                'dropped in sync: duplicates': sum(x.unmatched['duplicates'] for x in stats),
+                'sets decided early (queue full)': s.overflow_decisions}
+            new = {k: v - self._drops_reported.get(k, 0) for k, v in drops.items()}
+            self._drops_reported = drops
             values = {'sets emitted': s.sets_emitted, 'partial sets': s.partial_sets,
                       'pivots dropped (too few views)': s.pivots_dropped,
-                      'pending messages': s.pending(), 'resets': self.counts['resets']}
-            sync_status = make_status(
-                self.diagnostics.name('synchronizer'), OK,
-                f'{s.sets_emitted} sets, {s.partial_sets} partial', values=values)
+                      'pending messages': s.pending(), 'held outlier messages': s.held_outliers,
+                      'slop (ms)': s.slop_ns / 1e6,
+                      'frame period (ms)': (s.frame_period_ns or math.nan) / 1e6,
+                      'resets': self.counts['resets'],
+                      'idle steps (no input)': self.counts['idle_steps'], **drops}
+            changed = {k: v for k, v in new.items() if v > 0}
+            level = WARN if changed else OK
+            message = f'{s.sets_emitted} sets, {s.partial_sets} partial'
+            if changed:
+                message += '; this cycle: ' + ', '.join(f'{v} {k}' for k, v in changed.items())
+            sync_status = make_status(self.diagnostics.name('synchronizer'), level, message,
+                                      values=values)
             states = Counter(TrackState(t.state).name.lower() for t in self.last_tracks)
             f_level, f_msg, rate = self.output_rate.sample(now)
             values = {'active tracks': len(self.last_tracks),
@@ -661,6 +777,7 @@ class FusionNode(Node):
                       'latency p95 (ms)': self.latency.percentile(95) * 1e3,
                       'processing median (ms)': self.processing.percentile(50) * 1e3,
                       'processing p95 (ms)': self.processing.percentile(95) * 1e3,
+                      'processing max (ms)': self.processing.percentile(100) * 1e3,
                       'fusion errors': self.counts['fusion_errors']}
             level, message = OK, f'{len(self.last_tracks)} tracks'
             if self.fusion is None:
@@ -677,7 +794,30 @@ class FusionNode(Node):
                 f'{len(self.camera_ids)} cameras from {self.rig_path}',
                 values={'rig_config': self.rig_path, **{f'{c} problem': p
                                                         for c, p in problems.items()}})
-            return [sync_status, track_status, calib]
+            return [sync_status, track_status, calib, self._diag_clock(now)]
+
+    def _diag_clock(self, steady: int) -> Any:
+        """Node clock status: under use_sim_time, ERROR naming /clock when it stopped."""
+        node_now = self._now_ns()
+        if node_now != self._clock_seen[0]:
+            self._clock_seen = (node_now, steady)
+        stalled = (steady - self._clock_seen[1]) / NS_PER_S
+        sim = bool(self.get_parameter('use_sim_time').value)
+        values = {'use_sim_time': sim, 'node clock (s)': node_now / NS_PER_S,
+                  'unchanged for (s, steady clock)': stalled}
+        name = self.diagnostics.name('clock')
+        if not sim:
+            return make_status(name, OK, 'system clock', values=values)
+        if node_now == 0:
+            return make_status(name, ERROR, f'no /clock received for {stalled:.1f} s '
+                               '(use_sim_time is true: start the bag player with --clock)',
+                               values=values)
+        if stalled * NS_PER_S > self.clock_stall_ns:
+            return make_status(name, ERROR, f'/clock stalled at {node_now / NS_PER_S:.3f} s '
+                               f'for {stalled:.1f} s: sim time does not advance (player paused '
+                               'or gone), so inputs are judged against a stopped clock',
+                               values=values)
+        return make_status(name, OK, '/clock advancing', values=values)
 
 
 def camera_from_info(rig_camera: Camera, msg: CameraInfo) -> Camera:

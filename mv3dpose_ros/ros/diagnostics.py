@@ -18,17 +18,20 @@ A small ``/diagnostics`` publisher with diagnostic_updater's key names.
 ``diagnostic_updater`` is not in the wheels. This keeps its conventions so that
 ``rqt_robot_monitor`` and aggregators read our status as usual: status name
 ``"<node name>: <task>"``, hardware id, levels OK/WARN/ERROR/STALE, the FrequencyStatus and
-TimeStampStatus keys. "Now" is always the node clock, so delays and rates stay right under
-``use_sim_time`` (bag replay); the statistics classes take times in nanoseconds and do not
-import rclpy, so pose2d_node and fusion_node share them.
+TimeStampStatus keys. Stamp delays are measured against the node clock, so they stay right
+under ``use_sim_time`` (bag replay); the publish timer and the log throttle run on the steady
+clock, so a stalled ``/clock`` is still reported. The statistics classes take times in
+nanoseconds, so pose2d_node and fusion_node share them.
 """
 
 from collections import deque
 import math
+import time
 from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from mv3dpose_ros.ros.qos import publisher_events, reliable_qos
+from rclpy.clock import Clock, ClockType
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
@@ -177,7 +180,12 @@ class WindowStats:
 
 
 class RateLimitedLog:
-    """Log a message per key at most once per ``period_s`` (node clock), counting the rest."""
+    """
+    Log a message per key at most once per ``period_s``, counting the rest.
+
+    Times are on the steady clock (``time.monotonic_ns``) unless the caller passes its own
+    ``now_ns``: a stalled sim clock must not silence (or flood) the log.
+    """
 
     def __init__(self, log: Callable[[str], None], period_s: float = 5.0) -> None:
         self._log = log
@@ -185,8 +193,10 @@ class RateLimitedLog:
         self._last: Dict[str, int] = {}
         self._suppressed: Dict[str, int] = {}
 
-    def __call__(self, key: str, text: str, now_ns: int) -> bool:
+    def __call__(self, key: str, text: str, now_ns: Optional[int] = None) -> bool:
         """Log ``text`` unless ``key`` was logged within the period; return whether logged."""
+        if now_ns is None:
+            now_ns = time.monotonic_ns()
         last = self._last.get(key)
         if last is not None and 0 <= now_ns - last < self._period_ns:
             self._suppressed[key] = self._suppressed.get(key, 0) + 1
@@ -203,7 +213,8 @@ class Diagnostics:
     Periodic ``/diagnostics`` publisher for one node.
 
     Tasks are callables returning a list of statuses (``make_status``); they are called on a
-    node timer, every ``period_s`` of node time, and their statuses are published in one
+    steady-clock timer every ``period_s`` (so a stalled or paused ``/clock`` under sim time
+    cannot stop the reports that would say so), and their statuses are published in one
     ``DiagnosticArray`` stamped with the node clock.
     """
 
@@ -214,7 +225,8 @@ class Diagnostics:
         self.publisher = node.create_publisher(
             DiagnosticArray, topic, qos, event_callbacks=publisher_events(node, topic, qos))
         self._tasks: List[Callable[[], List[DiagnosticStatus]]] = []
-        self.timer = node.create_timer(period_s, self.publish)
+        self.timer = node.create_timer(period_s, self.publish,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.last: Optional[DiagnosticArray] = None
 
     def name(self, task: str) -> str:

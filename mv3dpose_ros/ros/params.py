@@ -23,6 +23,7 @@ them back into an instance.
 """
 
 import dataclasses
+import difflib
 import inspect
 import io
 import os
@@ -231,3 +232,23 @@ def all_parameter_docs(node: Any) -> List[Dict[str, Any]]:
         rows.append({'name': name, 'type': Parameter.Type(desc.type).name.lower(), 'default': v,
                      'description': desc.description, 'read_only': desc.read_only})
     return rows
+
+
+def unknown_parameter_warnings(node: Any) -> List[str]:
+    """
+    Return one warning per parameter override the node did not declare (typo, stale name).
+
+    Overrides come from ``-p``, params files and launch arguments (rcl merges them before the
+    node starts); with ``allow_undeclared_parameters`` off rclpy silently ignores the ones the
+    node never declares, so each is named here with the closest declared name.
+    """
+    declared = sorted(node._parameters)
+    out = []
+    for name in sorted(getattr(node, '_parameter_overrides', {}) or {}):
+        if name in node._parameters or name in ('use_sim_time', 'start_type_description_service'):
+            continue
+        close = difflib.get_close_matches(name, declared, n=1, cutoff=0.6)
+        hint = f'; did you mean {close[0]!r}?' if close else ''
+        out.append(f'parameter {name!r} is not a parameter of {node.get_name()} and is '
+                   f'ignored{hint}')
+    return out
