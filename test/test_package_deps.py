@@ -210,8 +210,8 @@ def test_shipped_viewer_configs_name_the_published_topics_and_are_installed():
     layout = json.load(open(os.path.join(ROOT, 'config', 'mv3dpose.foxglove.json')))
     panels = layout['configById']
     three_d = next(v for k, v in panels.items() if k.startswith('3D!'))
-    assert {SCENE_TOPIC, CAMERAS_TOPIC} <= {t for t, c in three_d['topics'].items()
-                                           if c['visible']}
+    visible = {t for t, c in three_d['topics'].items() if c['visible']}
+    assert {SCENE_TOPIC, CAMERAS_TOPIC} <= visible
     paths = [p['value'] for k, v in panels.items() if k.startswith('Plot!') for p in v['paths']]
     paths += [v['topicPath'] for k, v in panels.items() if k.startswith('RawMessages!')]
     assert paths and all(p.startswith('/fusion_node/tracks.skeletons') for p in paths)

@@ -131,7 +131,7 @@ def no_tf2(monkeypatch):
 
 # ------------------------------------------------------------------------------ frames maths
 def _person(track_id, root, yaw, state=TrackState.CONFIRMED, hips=True, velocity=(0, 0, 0)):
-    """A coco17 track standing at ``root`` facing ``yaw`` (hips 0.3 m apart)."""
+    """Return a coco17 track standing at ``root`` facing ``yaw`` (hips 0.3 m apart)."""
     J = LAYOUT.num_joints
     joints = np.full((J, 3), np.nan)
     left, right = LAYOUT.root_joints
@@ -332,8 +332,8 @@ def test_extrinsics_from_tf_replace_the_rig_poses(fake_tf2, node_run, shared_dat
 
 
 @pytest.mark.ros
-def test_extrinsics_from_tf_missing_frame_is_a_clear_config_error(fake_tf2, node_run,
-                                                                 shared_data):
+def test_extrinsics_from_tf_missing_frame_is_a_clear_config_error(
+        fake_tf2, node_run, shared_data):
     from mv3dpose_ros.nodes.fusion_node import ConfigError
     feed = Pose2Sim(shared_data, frames=1)
     for tf in camera_transforms(feed.cameras, Header(frame_id='map')):

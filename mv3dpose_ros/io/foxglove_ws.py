@@ -78,7 +78,7 @@ def _ros2msg_decoder(name: str, schema: str) -> Callable[[bytes], Any]:
     from rosbags.typesys import get_types_from_msg, get_typestore, Stores
     store = get_typestore(Stores.EMPTY)
     types: Dict[str, Any] = {}
-    blocks = [b for b in schema.split('\n' + '=' * 80 + '\n')]
+    blocks = schema.split('\n' + '=' * 80 + '\n')
     for i, block in enumerate(blocks):
         typename = name
         if i > 0:

@@ -224,4 +224,3 @@ def render_scene(entities: Mapping[str, Mapping[str, Any]], title: str = '',
     cv2.putText(bar, title or f'{len(entities)} scene entities', (8, 24),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.55, (30, 30, 30), 1, cv2.LINE_AA)
     return np.vstack([bar, images[0], images[1]])
-
