@@ -1,0 +1,312 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+A live rig as a user runs it: free-running image publishers -> mv3dpose_bringup -> tracks.
+
+One ``mv3dpose_image_publisher`` process per camera publishes the real Panoptic frames (1080p,
+looped) at ``--rate`` on capture instants of the system clock (not paced by anyone, no sim
+time); ``mv3dpose_bringup`` starts one ``pose2d_node`` per camera and ``fusion_node`` with the
+defaults. A probe records every ``persons_2d`` (which images inference processed, and when),
+every ``~/tracks`` message and ``/diagnostics``. Printed at the end:
+
+- sets emitted among the time points inference could process (>= 2 cameras' ``persons_2d``),
+  also among those whose inference skew between cameras stayed within ``sync.max_wait_s``;
+- per camera: frames published / skipped, received and dropped by pose2d (newer image
+  arrived = overload), dropped or rejected by fusion, by reason;
+- capture -> tracks latency (probe receipt - capture stamp) p50 / p95, and when the first
+  tracks message with N confirmed people arrived.
+
+    python bench/bench_rig.py [--cameras 4] [--rate 10] [--duration 60] [--compressed jpeg]
+
+``test/test_live_rig.py`` runs the same rig, shorter, and asserts on the same figures.
+"""
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Dict, List, Optional, Sequence
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEMO = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo')
+CALIBRATION = os.path.join(DEMO, 'camera_parameters.json')
+CAMERAS = ('00_03', '00_06', '00_12', '00_13', '00_23')
+NS = 1_000_000_000
+
+
+class Probe:
+    """Record persons_2d, tracks and /diagnostics of a running rig (own rclpy context)."""
+
+    def __init__(self, cameras: Sequence[str]) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        from diagnostic_msgs.msg import DiagnosticArray
+        from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
+        from mv3dpose_ros.ros.names import camera_topic
+        from mv3dpose_ros.ros.qos import reliable_qos
+
+        self.cameras = list(cameras)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('rig_probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.lock = threading.Lock()
+        self.persons: Dict[int, Dict[str, int]] = {}      # stamp -> camera -> arrival ns
+        self.people: Dict[int, Dict[str, int]] = {}       # stamp -> camera -> persons
+        self.tracks: List[tuple] = []                     # (stamp, arrival, confirmed, total)
+        self.status: Dict[tuple, dict] = {}               # (name, hardware_id) -> values
+        for cam in self.cameras:
+            self.node.create_subscription(
+                Person2DArray, camera_topic('/{camera}/persons_2d', cam),
+                lambda m, c=cam: self._on_persons(c, m), reliable_qos(50))
+        self.node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks',
+                                      self._on_tracks, reliable_qos(50))
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag,
+                                      reliable_qos(50))
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def _stamp(header) -> int:
+        return header.stamp.sec * NS + header.stamp.nanosec
+
+    def _on_persons(self, cam: str, msg) -> None:
+        now = time.time_ns()
+        with self.lock:
+            stamp = self._stamp(msg.header)
+            self.persons.setdefault(stamp, {})[cam] = now
+            self.people.setdefault(stamp, {})[cam] = len(msg.persons)
+
+    def _on_tracks(self, msg) -> None:
+        now = time.time_ns()
+        confirmed = sum(s.state == s.CONFIRMED for s in msg.skeletons)
+        with self.lock:
+            self.tracks.append((self._stamp(msg.header), now, confirmed, len(msg.skeletons)))
+
+    def _on_diag(self, msg) -> None:
+        with self.lock:
+            for st in msg.status:
+                self.status[(st.name, st.hardware_id)] = {kv.key: kv.value for kv in st.values}
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def first_confirmed(self, people: int, since_ns: int) -> Optional[float]:
+        """Return seconds from ``since_ns`` to the first tracks with ``people`` confirmed."""
+        with self.lock:
+            hits = [t for _, t, c, _ in self.tracks if c >= people]
+        return (min(hits) - since_ns) / NS if hits else None
+
+    def cameras_answering(self) -> int:
+        """Return how many cameras have published persons_2d so far."""
+        with self.lock:
+            return len({c for cams in self.persons.values() for c in cams})
+
+    def close(self) -> None:
+        """Stop spinning and shut the context down."""
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+    def values(self, suffix: str) -> dict:
+        """Return the latest diagnostics values of the status whose name ends with ``suffix``."""
+        with self.lock:
+            for (name, _), vals in self.status.items():
+                if name.endswith(suffix):
+                    return dict(vals)
+        return {}
+
+
+def analyse(probe: Probe, start_ns: int, end_ns: int, max_wait_s: float,
+            min_views: int = 2) -> dict:
+    """Figures of the time points stamped within ``[start_ns, end_ns]``."""
+    with probe.lock:
+        persons = {s: dict(c) for s, c in probe.persons.items() if start_ns <= s <= end_ns}
+        tracks = [t for t in probe.tracks if start_ns <= t[0] <= end_ns]
+    processable = {s: c for s, c in persons.items() if len(c) >= min_views}
+    emitted = {t[0] for t in tracks}
+    skew = {s: (max(c.values()) - min(c.values())) / NS for s, c in processable.items()}
+    within = [s for s in processable if skew[s] <= max_wait_s]
+    latency = sorted((arr - stamp) / 1e6 for stamp, arr, _, _ in tracks)
+
+    def pct(part: int, whole: int) -> float:
+        return 100.0 * part / whole if whole else float('nan')
+
+    def q(values: List[float], p: float) -> float:
+        if not values:
+            return float('nan')
+        return values[min(len(values) - 1, int(round(p / 100.0 * (len(values) - 1))))]
+
+    skews = sorted(skew.values())
+    return {
+        'time_points_seen': len(persons), 'processable': len(processable),
+        'emitted': len(emitted & set(processable)),
+        'emitted_pct': pct(len(emitted & set(processable)), len(processable)),
+        'within_wait': len(within), 'emitted_within_wait': len(emitted & set(within)),
+        'emitted_within_wait_pct': pct(len(emitted & set(within)), len(within)),
+        'skew_p50_ms': q(skews, 50) * 1e3, 'skew_p95_ms': q(skews, 95) * 1e3,
+        'latency_p50_ms': q(latency, 50), 'latency_p95_ms': q(latency, 95),
+        'tracks_messages': len(tracks),
+        'missed': sorted(set(processable) - emitted),
+    }
+
+
+def drop_table(probe: Probe, published: Dict[str, str]) -> List[str]:
+    """Return one line per camera: published, pose2d and fusion counts by reason."""
+    lines = []
+    for cam in probe.cameras:
+        p2d = probe.values(f': {cam} inference')     # pose2d_node: <cam> inference
+        fus = probe.values(f': {cam} input')         # fusion_node: <cam> input
+        parts = [f'published {published.get(cam, "?")}']
+        for key in ('Images received', 'Images processed'):
+            if key in p2d:
+                parts.append(f'pose2d {key.split()[-1]} {p2d[key]}')
+        parts += [f'pose2d {k.lower()} {v}' for k, v in p2d.items()
+                  if 'dropped' in k.lower() or 'rejected' in k.lower()]
+        parts += [f'fusion {k} {v}' for k, v in fus.items()
+                  if any(w in k for w in ('dropped', 'late', 'rejected', 'outlier', 'lost',
+                                          'missing')) and v not in ('0', '0.0')]
+        lines.append(f'  {cam}: ' + ', '.join(parts))
+    return lines
+
+
+def publisher_command(cam: str, rate: float, compressed: str = '',
+                      extra: Sequence[str] = ()) -> List[str]:
+    """Return the ``mv3dpose_image_publisher`` command of Panoptic camera ``cam``."""
+    cmd = ['mv3dpose_image_publisher', os.path.join(DEMO, cam), '--camera', cam, '--rate',
+           f'{rate:g}', '--loop', '--preload', '--calibration', CALIBRATION, *extra]
+    return cmd + (['--compressed', compressed] if compressed else [])
+
+
+def stop(procs: Sequence[subprocess.Popen], timeout: float = 20.0) -> None:
+    """SIGINT every process (its group), then kill what is left after ``timeout``."""
+    for p in procs:
+        if p.poll() is None:
+            try:
+                os.killpg(p.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+    deadline = time.monotonic() + timeout
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def published_counts(logs: Dict[str, str]) -> Dict[str, str]:
+    """Read 'published N frames[, skipped M instants]' from each publisher log."""
+    import re
+    out = {}
+    for cam, path in logs.items():
+        with open(path, encoding='utf-8', errors='replace') as f:
+            hits = re.findall(r'published (\d+) frames(?:, skipped (\d+) instants)?', f.read())
+        if hits:
+            n, skipped = hits[-1]
+            out[cam] = n + (f' (skipped {skipped} instants, CPU)' if skipped else '')
+    return out
+
+
+def main() -> int:
+    """Run the rig and print the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--cameras', type=int, default=4)
+    parser.add_argument('--rate', type=float, default=10.0)
+    parser.add_argument('--duration', type=float, default=60.0)
+    parser.add_argument('--warmup', type=float, default=10.0,
+                        help='seconds after every camera answered before measuring')
+    parser.add_argument('--compressed', choices=('jpeg', 'png'), default='')
+    parser.add_argument('--max-wait-s', type=float, default=None,
+                        help='sync.max_wait_s to judge skew (default: config/fusion.yaml)')
+    parser.add_argument('--people', type=int, default=3)
+    parser.add_argument('--logs', default='', help='folder for the process logs')
+    args = parser.parse_args()
+    if not os.path.isdir(DEMO):
+        print(f'bench_rig: skipped: no Panoptic frames at {DEMO}')
+        return 0
+    cams = CAMERAS[:args.cameras]
+    max_wait = args.max_wait_s
+    if max_wait is None:
+        import yaml
+        with open(os.path.join(ROOT, 'config', 'fusion.yaml'), encoding='utf-8') as f:
+            doc = yaml.safe_load(f)
+        max_wait = next((float(s['ros__parameters']['sync']['max_wait_s'])
+                         for s in doc.values() if 'sync' in s.get('ros__parameters', {})), 0.1)
+    logdir = args.logs or tempfile.mkdtemp(prefix='bench_rig_')
+    os.makedirs(logdir, exist_ok=True)
+    procs, logs = [], {}
+    probe = Probe(cams)
+    t_start = time.time_ns()
+
+    def launch(cmd: List[str], name: str) -> subprocess.Popen:
+        log = open(os.path.join(logdir, f'{name}.log'), 'w')
+        return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT,
+                                start_new_session=True)
+
+    try:
+        procs.append(launch(['mv3dpose_bringup', '--rig', CALIBRATION, '--cameras', *cams],
+                            'bringup'))
+        for cam in cams:
+            logs[cam] = os.path.join(logdir, f'publisher_{cam}.log')
+            procs.append(launch(publisher_command(cam, args.rate, args.compressed,
+                                                  ['--wait-for-subscribers', '1']),
+                                f'publisher_{cam}'))
+        deadline = time.monotonic() + 120
+        while probe.cameras_answering() < len(cams) and time.monotonic() < deadline:
+            if procs[0].poll() is not None:
+                raise SystemExit(f'bringup exited with {procs[0].returncode}; see {logdir}')
+            time.sleep(0.2)
+        t_ready = time.time_ns()
+        time.sleep(args.warmup + args.duration + 2.0)
+        t_end = time.time_ns() - 2 * NS
+        first = probe.first_confirmed(args.people, t_start)
+    finally:
+        stop(procs[1:])
+        stop(procs[:1])
+        time.sleep(0.5)
+    res = analyse(probe, t_ready + int(args.warmup * NS), t_end, max_wait)
+    published = published_counts(logs)
+    probe.close()
+    print(f'{len(cams)} cameras x 1920x1080 {args.compressed or "bgr8"} at {args.rate:g} Hz, '
+          f'{args.duration:g} s measured after {args.warmup:g} s warm-up; '
+          f'{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; logs in {logdir}')
+    print(f'time points with persons_2d: {res["time_points_seen"]}, processable (>= 2 '
+          f'cameras): {res["processable"]}, sets emitted: {res["emitted"]} '
+          f'({res["emitted_pct"]:.1f} %)')
+    print(f'inference skew between cameras p50 {res["skew_p50_ms"]:.0f} ms, p95 '
+          f'{res["skew_p95_ms"]:.0f} ms; within sync.max_wait_s {max_wait:g} s: '
+          f'{res["within_wait"]} time points, emitted {res["emitted_within_wait"]} '
+          f'({res["emitted_within_wait_pct"]:.1f} %)')
+    print(f'capture -> tracks latency p50 {res["latency_p50_ms"]:.0f} ms, p95 '
+          f'{res["latency_p95_ms"]:.0f} ms ({res["tracks_messages"]} tracks messages)')
+    print(f'first tracks with {args.people} confirmed people: '
+          + (f'{first:.1f} s after start' if first is not None else 'never'))
+    print('per camera (whole run):')
+    print('\n'.join(drop_table(probe, published)))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
