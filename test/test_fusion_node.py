@@ -547,3 +547,76 @@ def test_dynamic_parameters_apply_and_topology_is_read_only(harness_factory, sce
     assert h.wait_sets(2)
     assert {s.state for s in h.tracks[-1].skeletons} == {TrackState.TENTATIVE}
     assert len(h.tracks[-1].skeletons) == scene.num_people
+
+
+@pytest.mark.parametrize('glitch_s', [1.0, -1.0])
+def test_single_mis_stamped_message_no_reset_no_id_change(harness_factory, scene, glitch_s):
+    """Issue 11 defect 2: one message stamped +-1 s is dropped and counted; ids stay."""
+    h = harness_factory()
+    t0 = base_ns(60)
+    for cam, msg, _ in stream(scene, t0, range(30)):
+        h.publish(cam, msg)
+    assert h.wait_sets(30)
+    before = {t.track_id for t in h.tracks[-1].skeletons if t.state == TrackState.CONFIRMED}
+    assert len(before) == scene.num_people
+    glitch = person_msg(scene, 'cam_02', scene.views[30]['cam_02'],
+                        t0 + 30 * NS // 30 + int(glitch_s * NS))
+    h.publish('cam_02', glitch)
+    for cam, msg, _ in stream(scene, t0, range(30, 60)):
+        h.publish(cam, msg)
+    assert h.wait_sets(59), dict(h.node.counts)
+    assert h.node.counts['resets'] == 0
+    assert h.node.sync.stats['cam_02'].outliers == 1
+    after = {t.track_id for m in h.tracks[30:] for t in m.skeletons}
+    assert after == before
+
+
+def test_persons_over_the_limit_dropped_whole_and_counted(harness_factory, scene):
+    """Issue 11 defect 1: a message over limits.max_persons never reaches association."""
+    h = harness_factory(**{'limits.max_persons': 5})
+    t0 = base_ns(20)
+    crowd = np.concatenate([scene.views[0]['cam_01']] * 4)      # 12 persons
+    for cam, msg, f in stream(scene, t0, range(10)):
+        if cam == 'cam_01' and f == 3:
+            msg = person_msg(scene, cam, crowd, stamp_to_ns(msg.header.stamp))
+        h.publish(cam, msg)
+    assert h.wait_sets(10)
+    assert dict(h.node.cams['cam_01'].rejected) == {'too_many_persons': 1}
+    assert h.node.counts['partial_sets'] == 1
+
+
+def test_tracks_deleted_when_every_input_stops(harness_factory, scene):
+    """Issue 9 item 5: no stale output; empty steps age the tracks to DELETED."""
+    h = harness_factory(**{'fusion.max_coast_s': 0.6})
+    t0 = base_ns(30)
+    for cam, msg, _ in stream(scene, t0, range(30)):
+        h.publish(cam, msg)
+    assert h.wait_sets(30)
+    confirmed = {t.track_id for t in h.tracks[-1].skeletons if t.state == TrackState.CONFIRMED}
+    assert len(confirmed) == scene.num_people
+    n = len(h.tracks)
+    assert h.spin_until(lambda: not len(h.node.fusion.tracker.tracks), 5.0)
+    assert h.spin_until(lambda: any(t.state == TrackState.DELETED
+                                    for m in h.tracks[n:] for t in m.skeletons), 2.0)
+    later = [t for m in h.tracks[n:] for t in m.skeletons]
+    assert {t.track_id for t in later if t.state == TrackState.DELETED} == confirmed
+    assert h.node.counts['idle_steps'] >= 1
+    stamps = [stamp_to_ns(m.header.stamp) for m in h.tracks]
+    assert stamps == sorted(stamps)
+
+
+def test_stalled_clock_reported_as_error_naming_clock(harness_factory, scene):
+    """Issue 11 defect 3: diagnostics run on the steady clock and name /clock."""
+    h = harness_factory(use_sim_time=True, **{'diagnostics.clock_stall_s': 0.5})
+    clock_pub = h.probe.create_publisher(Clock, '/clock', 10)
+    clock_pub.publish(Clock(clock=ns_to_stamp(1000 * NS)))
+    assert h.spin_until(lambda: h.node.get_clock().now().nanoseconds == 1000 * NS, 5.0)
+    h.diags.clear()
+
+    def clock_error():
+        s = h.latest_status('clock')
+        return s is not None and s.level == b'\x02'
+
+    assert h.spin_until(clock_error, 5.0)
+    status = h.latest_status('clock')
+    assert '/clock stalled at 1000.000 s' in status.message

@@ -567,8 +567,9 @@ class FusionNode(Node):
         /diagnostics).
         """
         with self._lock:
-            if self.fusion is None or not self.last_tracks or self._last_set_ns is None or \
-                    self._last_set_node_ns is None or self.sync.pending():
+            if self.fusion is None or not len(self.fusion.tracker.tracks) or \
+                    self._last_set_ns is None or self._last_set_node_ns is None or \
+                    self.sync.pending():
                 return
             idle_ns = self._now_ns() - self._last_set_node_ns
             # Frames captured up to (now - wait) would have arrived: the empty step stands for
