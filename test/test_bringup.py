@@ -198,3 +198,13 @@ def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
     for pid in pids:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_no_fusion_starts_the_pose2d_nodes_only(rig):
+    res = bringup('--rig', rig, '--no-fusion', '--dry-run')
+    assert res.returncode == 0, res.stderr
+    started = [ln.split(':')[0] for ln in res.stdout.splitlines() if ln.startswith(('pose2d',
+                                                                                    'fusion'))]
+    assert started == [f'pose2d_node[{c}]' for c in CAMS]
+    res = bringup('--rig', rig, '--no-fusion', '--no-pose2d', '--dry-run')
+    assert res.returncode == 2 and 'start nothing' in res.stderr

@@ -176,7 +176,8 @@ class Plan:
                                                      '-r', 'image:=' + camera_topic(
                                                          self.args.image_topic, cam)]
                 out[f'pose2d_node[{cam}]'] = argv + files
-        out['fusion_node'] = _executable('fusion_node') + ['--ros-args'] + files
+        if not self.args.no_fusion:
+            out['fusion_node'] = _executable('fusion_node') + ['--ros-args'] + files
         return out
 
 
@@ -343,7 +344,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='override a fusion_node parameter (repeatable)')
     p.add_argument('--use-sim-time', action='store_true', help='use_sim_time for all nodes')
     p.add_argument('--no-pose2d', action='store_true', help='start fusion_node only (2D poses '
-                   'come from elsewhere, e.g. a bag)')
+                   'come from elsewhere, e.g. a bag or other hosts)')
+    p.add_argument('--no-fusion', action='store_true', help='start the pose2d_nodes only '
+                   '(fusion_node runs on another host)')
     p.add_argument('--respawn', action='store_true', help='restart nodes that exit')
     p.add_argument('--stop-timeout', type=float, default=10.0,
                    help='seconds to wait after SIGINT before SIGTERM (default 10)')
@@ -354,7 +357,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``bringup`` console script."""
-    args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    if args.no_pose2d and args.no_fusion:
+        parser.error('--no-pose2d and --no-fusion together start nothing')
     plan = Plan(args)
     fd, override_file = tempfile.mkstemp(prefix='mv3dpose_bringup_', suffix='.yaml')
     try:
