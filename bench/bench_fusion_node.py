@@ -269,6 +269,74 @@ def _median(r: dict) -> float:
         return float('inf')
 
 
+def limits(cams: int = 4, persons: int = 2000, rate: float = 30.0) -> None:
+    """
+    Print what one oversized input costs fusion_node (dropped) and the step at the limits.
+
+    A FusionNode is built in this process; ``_on_persons`` gets the raw CDR as its raw
+    subscription would. The oversized message is a valid Person2DArray of ``persons`` people
+    (over ``limits.max_persons``): the time is its whole path to the drop. Then every camera
+    sends ``limits.max_persons`` people (the most a set can hold) and ``Fusion.step`` on that
+    set is timed: the worst case per set at the default limits.
+    """
+    import rclpy
+    from rclpy.parameter import Parameter
+    from mv3dpose_ros.core.calibration import save_rig_yaml
+    from mv3dpose_ros.nodes.fusion_node import FusionNode
+    import tempfile
+    scene = _scene(cams, 3, 2, rate, 0)
+    rig = os.path.join(tempfile.mkdtemp(), 'rig.yaml')
+    save_rig_yaml(scene.cameras, rig)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = FusionNode(context=ctx, parameter_overrides=[Parameter('rig_config', value=rig),
+                                                         Parameter('log_throttle_s', value=60.0)])
+    try:
+        cam = next(iter(scene.cameras))
+        rng = np.random.default_rng(0)
+        c = scene.cameras[cam]
+        j = 17
+
+        def crowd(n):
+            poses = np.stack([rng.uniform(0, c.width, (n, j)), rng.uniform(0, c.height, (n, j)),
+                              rng.uniform(0.3, 1.0, (n, j))], axis=-1)
+            return poses
+
+        for n in (persons, 400):      # over the byte limit; under it but over max_persons
+            big = bytes(serialize_message(numpy_to_person2d_array(
+                crowd(n), Header(stamp=ns_to_stamp_(time.time_ns()), frame_id=cam), cam,
+                c.width, c.height, scene.layout)))
+            node.cams[cam].rejected.clear()
+            times = []
+            for _ in range(20):
+                t0 = time.perf_counter()
+                node._on_persons(cam, big)
+                times.append(time.perf_counter() - t0)
+            print(f'{n} persons ({len(big)} bytes) on {cam}: dropped in median '
+                  f'{np.median(times) * 1e3:.2f} ms, max {max(times) * 1e3:.2f} ms over '
+                  f'{len(times)} messages; rejected {dict(node.cams[cam].rejected)}',
+                  flush=True)
+        limit = node.max_persons
+        views = {cm: crowd(limit) for cm in scene.cameras}
+        steps = []
+        for k in range(5):
+            t0 = time.perf_counter()
+            node.fusion.step(views, 1000.0 + k / rate)
+            steps.append(time.perf_counter() - t0)
+        print(f'worst case at the limits ({cams} cameras x {limit} persons, random poses): '
+              f'Fusion.step median {np.median(steps) * 1e3:.1f} ms, max '
+              f'{max(steps) * 1e3:.1f} ms', flush=True)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
+def ns_to_stamp_(ns: int):
+    """Return a builtin_interfaces Time (local helper; the messages module's needs rclpy)."""
+    from mv3dpose_ros.ros.messages import ns_to_stamp
+    return ns_to_stamp(ns)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--seconds', type=float, default=10.0)
@@ -280,7 +348,13 @@ def main() -> int:
                         help='also subscribe to ~/markers (as RViz would)')
     parser.add_argument('--micro', action='store_true',
                         help='time the message paths in-process instead (no DDS)')
+    parser.add_argument('--limits', action='store_true',
+                        help='time the drop of a 2,000-person message and the step at the '
+                             'input limits (in-process)')
     args = parser.parse_args()
+    if args.limits:
+        limits()
+        return 0
     if args.micro:
         print('node message paths in-process (median per call; shared machine)')
         for item in args.configs.split(','):

@@ -249,7 +249,7 @@ class FusionNode(Node):
         P.declare_dataclass(self, SyncConfig, 'sync', read_only=True)
         d(self, 'limits.max_persons', 50, 'Inputs with more persons are dropped and counted '
           '(too_many_persons), never clipped: bounds the work per set', read_only=True)
-        d(self, 'limits.max_message_bytes', 1_000_000, 'Inputs larger than this [bytes] are '
+        d(self, 'limits.max_message_bytes', 262_144, 'Inputs larger than this [bytes] are '
           'dropped and counted (too_large) before decoding', read_only=True)
         P.declare_dataclass(self, FusionConfig, 'fusion', read_only=True)
         d(self, 'publish_tentative', False, 'Also publish TENTATIVE (unconfirmed) tracks',
