@@ -24,6 +24,8 @@ by ``ros/scene.render_scene`` (set ``MV3DPOSE_FOXGLOVE_PNG=path`` to keep it).
 """
 
 import asyncio
+import base64
+import contextlib
 import os
 import socket
 import subprocess
@@ -31,6 +33,8 @@ import threading
 import time
 
 from conftest import interrupt
+import cv2
+from google.protobuf.timestamp_pb2 import Timestamp
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.fusion import Fusion
 from mv3dpose_ros.core.skeleton import get_layout
@@ -50,6 +54,7 @@ from std_msgs.msg import Header
 pytestmark = [pytest.mark.ros]
 
 SCENE, CAMERAS, TRACKS = '/mv3dpose/scene', '/mv3dpose/cameras', '/fusion_node/tracks'
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def free_port() -> int:
@@ -70,7 +75,7 @@ class Feeder:
             views = {c: person2d_array_to_numpy(m, 25).astype(np.float32).astype(np.float64)
                      for c, m in msgs.items()}
             tracks = fusion.step(views, feed.stamp_ns(i) / 1e9)
-            header = Header(stamp=msgs['cam_01'].header.stamp, frame_id='map')
+            header = Header(stamp=msgs['cam_01'].header.stamp, frame_id='world')
             self.frames.append((feed.stamp_ns(i), msgs, tracks_to_msg(tracks, header, LAYOUT)))
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
@@ -111,16 +116,14 @@ class Feeder:
         rclpy.shutdown(context=self.ctx)
 
 
-@pytest.fixture
-def view(shared_data, tmp_path):
-    feed = Pose2Sim(shared_data, frames=40)
+@contextlib.contextmanager
+def running_view(args, tmp_path, feeder):
+    """Run mv3dpose_foxglove_view with ``args`` until ``feeder``'s publishers matched it."""
     port = free_port()
     log_path = tmp_path / 'foxglove_view.log'
     log = open(log_path, 'w')
-    proc = subprocess.Popen(['mv3dpose_foxglove_view', '--rig', feed.rig_path, '--port',
-                             str(port)], stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True)
-    feeder = Feeder(feed)
+    proc = subprocess.Popen(['mv3dpose_foxglove_view', '--port', str(port)] + args,
+                            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     executor = SingleThreadedExecutor(context=feeder.ctx)
     executor.add_node(feeder.node)
     try:
@@ -129,13 +132,22 @@ def view(shared_data, tmp_path):
             assert proc.poll() is None, log_path.read_text()
             executor.spin_once(timeout_sec=0.05)
         assert feeder.matched(), 'foxglove_view never subscribed: ' + log_path.read_text()
-        feeder.start()
-        yield f'ws://127.0.0.1:{port}', feeder, proc, log_path
+        executor.remove_node(feeder.node)
+        yield f'ws://127.0.0.1:{port}', proc, log_path
     finally:
         feeder.close()
         code = interrupt(proc, 10)
         log.close()
     assert code == 0, log_path.read_text()
+
+
+@pytest.fixture
+def view(shared_data, tmp_path):
+    feed = Pose2Sim(shared_data, frames=40)
+    feeder = Feeder(feed)
+    with running_view(['--rig', feed.rig_path], tmp_path, feeder) as (url, proc, log_path):
+        feeder.start()
+        yield url, feeder, proc, log_path
 
 
 def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
@@ -197,7 +209,7 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
         assert set(ents) == {f'person/{i}' for i in live}
         for tid, s in live.items():
             e = ents[f'person/{tid}']
-            assert e['frame_id'] == 'map'
+            assert e['frame_id'] == 'world'         # the tracks' frame
             [line] = e['lines']
             assert line['type'] == 'LINE_LIST'
             valid = [j for j in s.joints if j.state != 0]
@@ -214,6 +226,7 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
     # Cameras: one frustum per rig camera, apex at the camera centre.
     cam_ents = latest_entities([m.decoded for m in got if m.topic == CAMERAS])
     assert set(cam_ents) == {f'camera/{c}' for c in cams}
+    assert {e['frame_id'] for e in cam_ents.values()} == {'world'}    # the rig's world_frame
     for c, cam in feeder.feed.cameras.items():
         apex = cam_ents[f'camera/{c}']['lines'][0]['points'][0]
         np.testing.assert_allclose([apex.get(k, 0.0) for k in 'xyz'],
@@ -237,3 +250,84 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
     time.sleep(0.5)
     assert 'unreadable TrackedSkeletonArray dropped' in log_path.read_text()
     assert proc.poll() is None
+
+
+class ImageFeeder:
+    """Publishes one real Panoptic image and, 0.1 s later, detections with its stamp."""
+
+    def __init__(self, shared_data):
+        from mv3dpose_ros.ros.images import numpy_to_image
+        from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array
+        from sensor_msgs.msg import Image
+        self.bgr = cv2.imread(os.path.join(shared_data, 'panoptic_demo', '00_03',
+                                           '00_03_00004500.jpg'))
+        assert self.bgr is not None and self.bgr.shape == (1080, 1920, 3)
+        stamp = ns_to_stamp(time.time_ns())
+        header = Header(stamp=stamp, frame_id='cam00_03_optical_frame')
+        self.image = numpy_to_image(self.bgr, header, 'bgr8')
+        # one COCO-17 person: a vertical stick figure in the image centre (only input here)
+        kp = np.zeros((1, 17, 3))
+        for j, (x, y) in {5: (900, 400), 6: (1020, 400), 11: (920, 650), 12: (1000, 650),
+                          13: (920, 850), 14: (1000, 850)}.items():
+            kp[0, j] = (x, y, 0.9)
+        self.keypoints = kp
+        self.persons = numpy_to_person2d_array(kp, header, '00_03', 1920, 1080, 'coco17')
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node('image_feeder', context=self.ctx)
+        self.image_pub = self.node.create_publisher(Image, '/cam00_03/image_raw',
+                                                    reliable_qos(2))
+        self.det_pub = self.node.create_publisher(Person2DArray, '/cam00_03/persons_2d',
+                                                  reliable_qos(5))
+
+    def matched(self):
+        return self.image_pub.get_subscription_count() > 0 and \
+            self.det_pub.get_subscription_count() > 0
+
+    def publish(self):
+        self.image_pub.publish(self.image)
+        time.sleep(0.1)            # detections come later than the image, as from pose2d_node
+        self.det_pub.publish(self.persons)
+
+    def close(self):
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.ctx)
+
+
+def test_images_with_the_2d_skeletons_drawn(shared_data, tmp_path):
+    rig = os.path.join(ROOT, 'config', 'rigs', 'panoptic_demo.yaml')
+    feeder = ImageFeeder(shared_data)
+    topic = '/cam00_03/image_skeletons'
+    with running_view(['--rig', rig, '--image-topic', '/{camera}/image_raw'], tmp_path,
+                      feeder) as (url, proc, log_path):
+        async def session():
+            async with FoxgloveClient(url) as client:
+                await client.wait_for_topics([topic], 15.0)
+                adv = client.topics()[topic]
+                await client.subscribe([topic])
+                await asyncio.sleep(0.3)
+                for _ in range(3):
+                    feeder.publish()
+                    got = await client.receive(3.0, lambda got: len(got) >= 1)
+                    if got:
+                        return adv, got
+                return adv, []
+        adv, got = asyncio.run(session())
+    assert adv['schemaName'] == 'foxglove.CompressedImage' and adv['encoding'] == 'protobuf'
+    assert got, 'no annotated image received: ' + log_path.read_text()
+    msg = got[0].decoded
+    assert msg['format'] == 'jpeg' and msg['frame_id'] == 'cam00_03_optical_frame'
+    stamp = feeder.image.header.stamp
+    ts = Timestamp()
+    ts.FromJsonString(msg['timestamp'])              # a well-known type: RFC 3339 in JSON
+    assert (ts.seconds, ts.nanos) == (stamp.sec, stamp.nanosec)
+    jpeg = np.frombuffer(base64.b64decode(msg['data']), np.uint8)
+    drawn = cv2.imdecode(jpeg, cv2.IMREAD_COLOR)
+    assert drawn.shape == (540, 960, 3)                     # scaled to image_max_width 960
+    plain = cv2.resize(feeder.bgr, (960, 540), interpolation=cv2.INTER_AREA)
+    diff = np.abs(drawn.astype(int) - plain.astype(int)).sum(axis=2)
+    # along the left thigh (hip 11 -> knee 13, x = 920 px full size = 460 px here): drawn
+    thigh = diff[340:410, 455:466]
+    assert np.median(thigh.max(axis=1)) > 100, 'skeleton not drawn on the image'
+    # far from the figure: the image itself, up to JPEG noise
+    assert np.median(diff[:150, :300]) < 25

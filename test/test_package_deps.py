@@ -26,6 +26,7 @@ Package metadata against the code: what ``mv3dpose_ros/`` and ``launch/`` import
 """
 
 import ast
+import glob
 from importlib.metadata import packages_distributions
 import json
 import os
@@ -203,13 +204,18 @@ def test_shipped_viewer_configs_name_the_published_topics_and_are_installed():
     from mv3dpose_ros.nodes.foxglove_view import CAMERAS_TOPIC, SCENE_TOPIC
     rviz = yaml.safe_load(open(os.path.join(ROOT, 'config', 'mv3dpose.rviz')))
     manager = rviz['Visualization Manager']
-    assert manager['Global Options']['Fixed Frame'] == 'map'
+    # the frame of the shipped rigs (fusion_node's world_frame defaults to the rig's)
+    rig_frames = {yaml.safe_load(open(p)).get('world_frame') for p in
+                  glob.glob(os.path.join(ROOT, 'config', 'rigs', '*.yaml'))} - {None}
+    assert rig_frames == {'world'}
+    assert manager['Global Options']['Fixed Frame'] == 'world'
     topics = {d['Class'].split('/')[-1]: d['Topic']['Value']
               for d in manager['Displays'] if 'Topic' in d}
     assert topics == {'MarkerArray': '/fusion_node/markers', 'PoseArray': '/fusion_node/poses'}
     layout = json.load(open(os.path.join(ROOT, 'config', 'mv3dpose.foxglove.json')))
     panels = layout['configById']
     three_d = next(v for k, v in panels.items() if k.startswith('3D!'))
+    assert three_d['followTf'] == three_d['layers']['grid']['frameId'] == 'world'
     visible = {t for t, c in three_d['topics'].items() if c['visible']}
     assert {SCENE_TOPIC, CAMERAS_TOPIC} <= visible
     paths = [p['value'] for k, v in panels.items() if k.startswith('Plot!') for p in v['paths']]

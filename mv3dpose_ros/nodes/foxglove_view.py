@@ -44,7 +44,7 @@ import foxglove
 from foxglove.channels import CompressedImageChannel, SceneUpdateChannel
 from foxglove.messages import CompressedImage as FoxgloveCompressedImage
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.io.bag import get_typestore
 from mv3dpose_ros.pose2d.draw import draw_people
@@ -96,8 +96,8 @@ class FoxgloveView(Node):
           'skeletons on (e.g. /{camera}/image_raw); empty = no images', read_only=True)
         d(self, 'image_max_width', 960, 'Images wider than this are scaled down [px]',
           read_only=True)
-        d(self, 'world_frame', 'map', 'Frame of the camera frustums (tracks keep theirs)',
-          read_only=True)
+        d(self, 'world_frame', '', 'Frame of the camera frustums (tracks keep theirs); empty = '
+          "the rig file's world_frame, else map (as fusion_node)", read_only=True)
         d(self, 'frustum_depth_m', 0.5, 'Depth of the drawn camera frustums [m]',
           read_only=True)
         d(self, 'scene_lifetime_s', 0.5, 'Lifetime of skeleton entities [s] (safety net)',
@@ -110,7 +110,7 @@ class FoxgloveView(Node):
 
         self.counts: Counter = Counter()
         self._rlog = RateLimitedLog(self.get_logger().warning, 5.0)
-        self.world_frame = v('world_frame')
+        self.world_frame = v('world_frame') or 'map'
         self.lifetime_s = float(v('scene_lifetime_s'))
         self.max_width = int(v('image_max_width'))
         self.cameras: Dict[str, Any] = {}
@@ -124,6 +124,7 @@ class FoxgloveView(Node):
             if unknown:
                 raise ValueError(f'camera_ids {unknown} are not in {v("rig_config")}')
             self.cameras = {c: rig[c] for c in ids}
+            self.world_frame = v('world_frame') or rig_metadata(v('rig_config'))[0] or 'map'
 
         self.fg_context = foxglove.Context()
         self.server = foxglove.start_server(name='mv3dpose', host=v('host'), port=v('port'),
