@@ -51,13 +51,14 @@ class ProtocolError(RuntimeError):
 
 @dataclass
 class Received:
-    """One message: channel topic, schema name, log time [ns], payload and decoded value."""
+    """One message: topic, schema name, log time and arrival [ns], payload, decoded value."""
 
     topic: str
     schema_name: str
     log_time: int
     payload: bytes
     decoded: Any
+    received_ns: int = 0           # wall clock (time.time_ns) when the frame arrived
 
 
 def _protobuf_decoder(name: str, schema_b64: str) -> Callable[[bytes], Any]:
@@ -186,6 +187,7 @@ class FoxgloveClient:
                 frame = await asyncio.wait_for(self._ws.recv(), deadline - time.monotonic())
             except asyncio.TimeoutError:
                 break
+            arrived = time.time_ns()
             if isinstance(frame, str):
                 self._control(frame)
                 continue
@@ -203,7 +205,8 @@ class FoxgloveClient:
             except Exception as exc:  # noqa: B902 - decoders raise many types
                 raise ProtocolError(f'{ch["topic"]}: payload of {len(payload)} bytes does not '
                                     f'decode with schema {ch["schemaName"]}: {exc}') from exc
-            out.append(Received(ch['topic'], ch['schemaName'], log_time, payload, value))
+            out.append(Received(ch['topic'], ch['schemaName'], log_time, payload, value,
+                                arrived))
         return out
 
 
