@@ -26,6 +26,7 @@ import subprocess
 import time
 
 from conftest import interrupt
+from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array
@@ -59,7 +60,8 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path):
     node = rclpy.create_node('player', context=ctx)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
-    received = []
+    received, diags = [], []
+    node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, reliable_qos(50))
     node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks',
                              lambda m: received.append(m), reliable_qos(1000), raw=True)
     pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(100))
@@ -102,4 +104,10 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path):
           f'({100 * len(received) / frames:.1f} %)')
     assert code == 0, text
     warnings = '\n'.join(line for line in text.splitlines() if 'INFO' not in line)
+    last = {}
+    for arr in diags:
+        for st in arr.status:
+            last[st.name] = f'{st.message} ' + ', '.join(f'{kv.key}={kv.value}'
+                                                        for kv in st.values)
+    warnings += '\n' + '\n'.join(f'{k}: {v}' for k, v in sorted(last.items()))
     assert len(received) >= 0.98 * frames, warnings[-3000:]
