@@ -17,12 +17,13 @@ Real detections for ROS tests: the Pose2Sim session (4 cameras, 2 people, OpenPo
 
 Read in place from ``../shared/data/pose2sim_multiperson`` (never copied); the rig is the
 project's conversion ``config/rigs/pose2sim_multiperson.yaml`` of its calibration. Stamps are
-``t0 + frame / 60 s`` with ``t0`` in the recent past of the wall clock, as a live rig's are.
+``t0 + frame / 60 s`` with ``t0`` in the recent past of the wall clock, or ``live_stamp()``
+(the wall clock minus a capture-to-publish delay, increasing) for a feed paced by its outputs.
 """
 
 import os
 import time
-from typing import Dict, Iterator, List, Tuple
+from typing import Dict, Iterator, List, Optional, Tuple
 
 from mv3dpose_msgs.msg import Person2DArray
 from mv3dpose_ros.core.calibration import load_calibration
@@ -51,15 +52,22 @@ class Pose2Sim:
         self.frames: List[Tuple[int, Dict[str, np.ndarray]]] = list(seq)[:frames]
         self.t0_ns = time.time_ns() - int((len(self.frames) / FPS + 1.0) * NS)
 
+    def live_stamp(self) -> int:
+        """Return a stamp as a live camera's: now minus 30 ms, and after the previous one."""
+        self._last_live = max(time.time_ns() - 30_000_000, getattr(self, '_last_live', 0) +
+                              int(NS / FPS))
+        return self._last_live
+
     def stamp_ns(self, index: int) -> int:
         """Return the stamp of the ``index``-th frame."""
         return self.t0_ns + int(round(index * NS / FPS))
 
-    def messages(self, index: int) -> Iterator[Tuple[str, Person2DArray]]:
-        """Yield ``(camera, Person2DArray)`` of the ``index``-th frame."""
+    def messages(self, index: int, stamp_ns: Optional[int] = None
+                 ) -> Iterator[Tuple[str, Person2DArray]]:
+        """Yield ``(camera, Person2DArray)`` of the ``index``-th frame (stamp: ``stamp_ns``)."""
         _, views = self.frames[index]
+        stamp = ns_to_stamp(self.stamp_ns(index) if stamp_ns is None else stamp_ns)
         for cam, poses in views.items():
             c = self.cameras[cam]
-            header = Header(stamp=ns_to_stamp(self.stamp_ns(index)),
-                            frame_id=f'{cam}_optical_frame')
+            header = Header(stamp=stamp, frame_id=f'{cam}_optical_frame')
             yield cam, numpy_to_person2d_array(poses, header, cam, c.width, c.height, LAYOUT)

@@ -34,8 +34,9 @@ from mv3dpose_ros.core.calibration import quaternion_to_matrix
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.ros.frames import (body_yaw, camera_from_transform, camera_transforms,
-                                     Headings, optical_frame, quaternion_from_yaw,
-                                     root_pose_array, track_transforms, yaw_from_quaternion)
+                                     Headings, optical_frame, pose_array_cdr,
+                                     quaternion_from_yaw, root_pose_array, root_poses,
+                                     track_transforms, yaw_from_quaternion)
 from mv3dpose_ros.ros.messages import msg_to_tracks, stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
 import numpy as np
@@ -212,6 +213,14 @@ def test_track_frames_and_pose_array_skip_tentative_deleted_and_rootless():
     # every non-deleted track with a root, in ~/tracks order (TENTATIVE included when published)
     assert [(p.position.x, p.position.y) for p in poses.poses] == [(1, 2), (0, 0), (3, 1)]
     assert poses.header is header
+    # the node publishes the same as CDR bytes
+    from geometry_msgs.msg import PoseArray
+    from rclpy.serialization import deserialize_message
+    header.stamp.sec, header.stamp.nanosec = 12, 345
+    cdr = pose_array_cdr(root_poses(tracks, yaws), header)
+    assert deserialize_message(cdr, PoseArray) == root_pose_array(tracks, yaws, header)
+    empty = pose_array_cdr(root_poses([], []), header)
+    assert deserialize_message(empty, PoseArray) == PoseArray(header=header)
 
 
 # ------------------------------------------------------------------------------ the node
@@ -255,7 +264,7 @@ class NodeRun:
 
     def play(self):
         for i in range(len(self.feed.frames)):
-            for cam, msg in self.feed.messages(i):
+            for cam, msg in self.feed.messages(i, self.feed.live_stamp()):
                 self.pubs[cam].publish(msg)
             assert self.spin_until(lambda: len(self.tracks) > i), f'no output for frame {i}'
 

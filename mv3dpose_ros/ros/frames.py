@@ -24,20 +24,24 @@ Coordinate frames of the rig and of the tracked people, as ``geometry_msgs``.
   left-minus-right hip vector turned by -90 degrees; when the hips are missing or too close
   (< 5 cm apart horizontally) it falls back to the direction of motion (> 0.3 m/s), then to the
   last heading seen for that track, then to the world's x axis.
-- ``root_pose_array``: the standard ``geometry_msgs/PoseArray`` output, one pose per skeleton of
-  ``~/tracks`` that has a root (DELETED tombstones left out), in the same order and header.
+- ``root_poses`` / ``pose_array_cdr``: the standard ``geometry_msgs/PoseArray`` output, one
+  pose per skeleton of ``~/tracks`` that has a root (DELETED tombstones left out), in the same
+  order and header, serialised straight to CDR like ``~/tracks`` (``root_pose_array`` builds
+  the same as a message object).
 
 No rclpy here: only message classes, so the functions are testable without a node or DDS.
 """
 
 import math
+import struct
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped
 from mv3dpose_ros.core.calibration import matrix_to_quaternion, quaternion_to_matrix
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.skeleton import Layout
-from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_ros.core.types import JointState, Track, TrackState
+from mv3dpose_ros.ros.messages import CdrWriter
 from mv3dpose_ros.ros.names import camera_namespace
 import numpy as np
 from std_msgs.msg import Header
@@ -45,6 +49,7 @@ from std_msgs.msg import Header
 MIN_HIP_WIDTH_M = 0.05       # horizontal hip distance below which the hips give no heading
 MIN_SPEED_MPS = 0.3          # speed above which the direction of motion gives the heading
 OPTICAL_FRAME = '{camera}_optical_frame'
+_STAMP = struct.Struct('<iI')
 
 
 def optical_frame(camera: str, template: str = OPTICAL_FRAME) -> str:
@@ -65,15 +70,15 @@ def yaw_from_quaternion(q: Quaternion) -> float:
 def body_yaw(track: Track, layout: Layout) -> Optional[float]:
     """Return the heading of a person (REP-155 body x axis) in radians, None when unknown."""
     left, right = layout.root_joints
-    lr = np.asarray(track.joints, dtype=np.float64)[left] - \
-        np.asarray(track.joints, dtype=np.float64)[right]
-    valid = np.asarray(track.valid)
-    if valid[left] and valid[right] and np.all(np.isfinite(lr)) and \
-            math.hypot(lr[0], lr[1]) >= MIN_HIP_WIDTH_M:
-        return math.atan2(lr[1], lr[0]) - 0.5 * math.pi   # y (left) axis -> x (forward)
-    v = np.asarray(track.velocity, dtype=np.float64)
-    if np.all(np.isfinite(v[:2])) and math.hypot(v[0], v[1]) >= MIN_SPEED_MPS:
-        return math.atan2(v[1], v[0])
+    states = track.joint_state
+    if states[left] != JointState.MISSING and states[right] != JointState.MISSING:
+        lx, ly = float(track.joints[left][0]), float(track.joints[left][1])
+        rx, ry = float(track.joints[right][0]), float(track.joints[right][1])
+        if math.hypot(lx - rx, ly - ry) >= MIN_HIP_WIDTH_M:     # False for NaN
+            return math.atan2(ly - ry, lx - rx) - 0.5 * math.pi   # y (left) axis -> x
+    vx, vy = float(track.velocity[0]), float(track.velocity[1])
+    if math.hypot(vx, vy) >= MIN_SPEED_MPS:
+        return math.atan2(vy, vx)
     return None
 
 
@@ -146,10 +151,10 @@ def camera_from_transform(camera: Camera, tf: TransformStamped) -> Camera:
 
 
 def _root(track: Track) -> Optional[Tuple[float, float, float]]:
-    xyz = np.asarray(track.position, dtype=np.float64)
-    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
+    x, y, z = (float(v) for v in track.position)
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return None
-    return float(xyz[0]), float(xyz[1]), float(xyz[2])
+    return x, y, z
 
 
 def track_transforms(tracks: Sequence[Track], yaws: Sequence[Optional[float]], header: Header,
@@ -165,20 +170,40 @@ def track_transforms(tracks: Sequence[Track], yaws: Sequence[Optional[float]], h
     return out
 
 
-def root_pose_array(tracks: Sequence[Track], yaws: Sequence[Optional[float]],
-                    header: Header) -> PoseArray:
+def root_poses(tracks: Sequence[Track], yaws: Sequence[Optional[float]]) -> np.ndarray:
     """
-    Return the standard output: the root pose of each skeleton published on ``~/tracks``.
+    Return the standard output's poses ``[K, 7]`` (x, y, z, qx, qy, qz, qw), float64.
 
-    One pose per non-DELETED track with a known root, in the order of ``tracks`` (the order of
+    One row per non-DELETED track with a known root, in the order of ``tracks`` (the order of
     ``TrackedSkeletonArray.skeletons``); orientation = heading (identity when unknown).
     """
-    msg = PoseArray(header=header)
+    rows = []
     for t, yaw in zip(tracks, yaws):
         root = _root(t)
         if t.state == TrackState.DELETED or root is None:
             continue
-        pose = Pose(orientation=quaternion_from_yaw(yaw or 0.0))
-        pose.position.x, pose.position.y, pose.position.z = root
+        half = 0.5 * (yaw or 0.0)
+        rows.append((*root, 0.0, 0.0, math.sin(half), math.cos(half)))
+    return np.array(rows, dtype='<f8').reshape(-1, 7)
+
+
+def pose_array_cdr(poses: np.ndarray, header: Header) -> bytes:
+    """Serialise ``geometry_msgs/PoseArray`` with ``poses`` (``root_poses`` rows) to CDR."""
+    w = CdrWriter()
+    w.pack(_STAMP, header.stamp.sec, header.stamp.nanosec)
+    w.strings((header.frame_id,), sequence=False)
+    w.sequence(np.ascontiguousarray(poses, dtype='<f8'), align=8)
+    return w.getvalue()
+
+
+def root_pose_array(tracks: Sequence[Track], yaws: Sequence[Optional[float]],
+                    header: Header) -> PoseArray:
+    """Return the standard output as a ``PoseArray`` message (the rows of ``root_poses``)."""
+    msg = PoseArray(header=header)
+    for x, y, z, qx, qy, qz, qw in root_poses(tracks, yaws).tolist():
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = x, y, z
+        o = pose.orientation
+        o.x, o.y, o.z, o.w = qx, qy, qz, qw
         msg.poses.append(pose)
     return msg
