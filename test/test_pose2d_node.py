@@ -24,12 +24,14 @@ Every wait is bounded; nothing asserts on speed.
 import os
 import subprocess
 import sys
+import threading
 import time
 
 from conftest import spin_until
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
+from mv3dpose_ros.pose2d import models
 from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
 from mv3dpose_ros.pose2d.ops import Letterbox
 from mv3dpose_ros.ros.images import numpy_to_image
@@ -49,6 +51,7 @@ pytestmark = [pytest.mark.ros]
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 W, H = 320, 240
 NS = 1_000_000_000
+REMAP = ['--ros-args', '-r', 'image:=image_raw']
 
 
 def _crafted_model(tmp_path):
@@ -107,7 +110,9 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
     model, expected = _crafted_model(tmp_path)
     folder = _image_folder(tmp_path, 3)
     start = int(time.time()) - 1
-    node = Pose2DNode(context=ros_context, namespace='/camx', parameter_overrides=[
+    # image_publisher publishes image_raw, as drivers do; pose2d reads 'image' (remapped)
+    node = Pose2DNode(context=ros_context, namespace='/camx', cli_args=REMAP,
+                      parameter_overrides=[
         Parameter('model.path', value=model), Parameter('model.threads', value=1),
         Parameter('image_qos.reliability', value='reliable'),
         Parameter('keypoint_threshold', value=0.5), Parameter('diagnostics_period_s', value=0.2)])
@@ -121,6 +126,7 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
     ex = SingleThreadedExecutor(context=ros_context)
     for n in (node, probe.node, pub):
         ex.add_node(n)
+    threading.Thread(target=pub.run, name='publisher', daemon=True).start()
     try:
         assert spin_until(ex, lambda: pub.done.is_set() and len(probe.persons) + node.dropped
                           >= 3 and node.processed + node.dropped >= 3, timeout=30)
@@ -153,7 +159,11 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
         keys = {kv.key: kv.value for kv in status.values}
         assert status.hardware_id == 'camx'
         assert int(keys['Images processed']) == node.processed
-        assert 'Inference latency median (ms)' in keys and 'Images dropped (newer arrived)' in keys
+        assert 'Inference latency median (ms)' in keys
+        assert 'Dropped before inference (newer image arrived)' in keys
+        assert keys['Execution provider'] == 'CPUExecutionProvider'
+        for stage in ('transport', 'wait', 'decode', 'pre', 'inference', 'post', 'publish'):
+            assert float(keys[f'Stage {stage} median (ms)']) >= 0.0, stage
 
         # Direct calls of the node's path: encodings, zero stamps, a dynamic threshold.
         header = Header(stamp=ns_to_stamp((start + 5) * NS), frame_id='camx_optical')
@@ -183,6 +193,54 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
         for n in (pub, probe.node, node):
             ex.remove_node(n)
             n.destroy_node()
+
+
+def _fake_cache(tmp_path, sizes):
+    """Return a model cache holding crafted 'yolo11n-pose' files of ``sizes`` (sidecars too)."""
+    import hashlib
+    import json
+    cache = tmp_path / 'cache'
+    cache.mkdir()
+    out = np.zeros((1, 56, 8400), np.float32)
+    out[0, :5, 0] = [100, 100, 50, 80, 0.9]
+    for hw in sizes:
+        data = make_constant_model([('images', np.float32, [1, 3, *hw])], {'output0': out},
+                                   {'task': 'pose'})
+        path = models.model_file('yolo11n-pose', hw, str(cache))
+        open(path, 'wb').write(data)
+        open(models.sidecar_file(path), 'w').write(json.dumps(
+            {'name': 'yolo11n-pose', 'family': 'yolo-pose', 'input_size': list(hw),
+             'onnx_sha256': hashlib.sha256(data).hexdigest()}))
+    return str(cache)
+
+
+@pytest.mark.parametrize('image_hw, sizes, chosen', [
+    ((1080, 1920), [(640, 640), (384, 640), (640, 384)], (384, 640)),
+    ((1920, 1088), [(640, 640), (384, 640), (640, 384)], (640, 384)),
+    ((1080, 1920), [(640, 640)], (640, 640)),          # the better fit is not fetched: kept
+    ((1080, 1920), [(640, 384)], (640, 384)),          # only a poor fit fetched: still runs
+])
+def test_input_size_auto_fits_the_first_image(ros_context, tmp_path, image_hw, sizes, chosen):
+    """model.input_size auto: the first image picks the fetched size that fits its aspect."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    cache = _fake_cache(tmp_path, sizes)
+    node = Pose2DNode(context=ros_context, namespace='/camfit', parameter_overrides=[
+        Parameter('model.cache_dir', value=cache), Parameter('model.threads', value=1)])
+    try:
+        assert node.active, node.error
+        assert node.get_parameter('model.input_size').value == 'auto'
+        node.set_parameters([Parameter('score_threshold', value=0.5)])
+        header = Header(stamp=ns_to_stamp(5 * NS), frame_id='f')
+        out = node.process(numpy_to_image(np.zeros((*image_hw, 3), np.uint8), header, 'bgr8'))
+        assert out is not None and len(out.persons) == 1
+        assert tuple(node.estimator.input_size) == chosen
+        assert node.estimator.score_threshold == 0.5          # dynamic values carried over
+        assert node.estimator.path == models.model_file('yolo11n-pose', chosen, cache)
+        before = node.estimator
+        node.process(numpy_to_image(np.zeros((480, 480, 3), np.uint8), header, 'bgr8'))
+        assert node.estimator is before                        # chosen once, at the first image
+    finally:
+        node.destroy_node()
 
 
 def test_missing_model_is_a_clear_start_error(tmp_path):
@@ -218,7 +276,8 @@ def test_console_processes_with_namespace_and_params_file(ros_context, tmp_path)
     ex.add_node(probe.node)
     node = subprocess.Popen(
         [sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node', '--ros-args',
-         '-r', '__ns:=/cam0', '--params-file', os.path.join(ROOT, 'config', 'pose2d.yaml'),
+         '-r', '__ns:=/cam0', '-r', 'image:=image_raw', '--params-file',
+         os.path.join(ROOT, 'config', 'pose2d.yaml'),
          '-p', f'model.path:={model}', '-p', 'model.threads:=1'],
         stdout=log, stderr=subprocess.STDOUT)
     images = None
@@ -255,7 +314,9 @@ def test_real_model_on_panoptic_frames(ros_context, shared_data):
     from mv3dpose_ros.nodes.image_publisher import ImagePublisher
     from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
     demo = os.path.join(shared_data, 'panoptic_demo')
-    node = Pose2DNode(context=ros_context, namespace='/p03', parameter_overrides=[
+    # image_publisher publishes image_raw, as drivers do; pose2d reads 'image' (remapped)
+    node = Pose2DNode(context=ros_context, namespace='/p03', cli_args=REMAP,
+                      parameter_overrides=[
         Parameter('model.path', value=model), Parameter('model.threads', value=2),
         Parameter('image_qos.reliability', value='reliable')])
     assert node.active, node.error
@@ -271,14 +332,16 @@ def test_real_model_on_panoptic_frames(ros_context, shared_data):
     ex = SingleThreadedExecutor(context=ros_context)
     for n in (node, probe.node, pub):
         ex.add_node(n)
+    threading.Thread(target=pub.run, name='publisher', daemon=True).start()
     try:
-        assert spin_until(ex, lambda: pub.done.is_set()
-                          and node.processed + node.dropped >= 5, timeout=120)
+        ok = spin_until(ex, lambda: pub.done.is_set()
+                        and node.processed + node.dropped >= 5, timeout=120)
+        assert ok, (pub.done.is_set(), node.received, node.processed, node.dropped, node.failed)
         spin_until(ex, lambda: len(probe.persons) >= node.processed, timeout=5)
         assert node.processed >= 1 and len(probe.persons) == node.processed
         assert infos and infos[0].width == 1920 and infos[0].k[0] > 0
         for msg in probe.persons:
-            assert msg.header.frame_id == '00_03_optical_frame'
+            assert msg.header.frame_id == 'cam00_03_optical_frame'
             assert (stamp_to_ns(msg.header.stamp) - 2000 * NS) % (NS // 4) == 0
             assert (msg.image_width, msg.image_height) == (1920, 1080)
             assert 2 <= len(msg.persons) <= 4, [p.score for p in msg.persons]

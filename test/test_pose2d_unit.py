@@ -461,3 +461,18 @@ def test_image_cdr_is_read_in_place():
         parse_image_cdr(wire[:-3])
     with pytest.raises(ImageError, match='plain CDR'):
         parse_image_cdr(b'\x00\x07\x00\x00' + wire[4:])
+
+
+def test_bringup_shares_the_cores_among_the_cameras(capsys):
+    from mv3dpose_ros.nodes import bringup
+    assert [bringup.split_threads(n, 2) for n in (1, 2, 4)] == [2, 1, 1]
+    assert [bringup.split_threads(n, 16) for n in (1, 3, 4, 8, 32)] == [16, 5, 4, 2, 1]
+    rig = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config',
+                       'rigs', 'panoptic_demo.yaml')
+    cams = ['00_03', '00_06', '00_12', '00_13']
+    assert bringup.main(['--rig', rig, '--cameras', *cams, '--dry-run']) == 0
+    out = capsys.readouterr().out
+    assert out.count(f'threads: {bringup.split_threads(4)}') == 4       # shipped threads: 0
+    assert bringup.main(['--rig', rig, '--cameras', *cams, '--dry-run',
+                         '--pose2d-param', 'model.threads:=3']) == 0
+    assert capsys.readouterr().out.count('threads: 3') == 4              # explicit value kept

@@ -108,6 +108,22 @@ def _nest(flat: Dict[str, Any]) -> Dict[str, Any]:
     return out
 
 
+def split_threads(cameras: int, cores: Optional[int] = None) -> int:
+    """
+    Return onnxruntime intra-op threads per pose2d_node: the cores shared among the cameras.
+
+    Each camera's node gets cores // cameras (at least 1), so N nodes do not start N x cores
+    threads that fight over the same cores. Measured in README "Choosing a model and a
+    provider".
+    """
+    if cores is None:
+        try:
+            cores = len(os.sched_getaffinity(0))
+        except AttributeError:
+            cores = os.cpu_count() or 1
+    return max(1, int(cores) // max(1, int(cameras)))
+
+
 class Plan:
     """The processes to start: names, commands and the generated override file's content."""
 
@@ -151,6 +167,11 @@ class Plan:
         self.namespaces = {c: camera_topic(ns_pattern, c) for c in self.cameras}
         overrides: Dict[str, Any] = {}
         pose2d_over = _parse_assignments(args.pose2d_param or [], '--pose2d-param')
+        threads = pose2d_over.get('model.threads', (_node_section(docs, 'pose2d_node').get(
+            'model') or {}).get('threads', 0))
+        if not args.no_pose2d and not threads:
+            # 0 = unset: share the cores among the cameras instead of N x all cores.
+            pose2d_over['model.threads'] = split_threads(len(self.cameras))
         for cam, ns in self.namespaces.items():
             overrides[f'{ns.rstrip("/")}/pose2d_node'] = {'ros__parameters': _nest(
                 {**pose2d_over, 'camera_id': cam})}

@@ -34,16 +34,18 @@ lifecycle node: the model loads in ``on_configure``, the subscription exists whi
 """
 
 import math
+import os
 import threading
 import time
-from typing import Any, List, Optional, Union
+from typing import Any, List, Optional, Tuple, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError, open_estimator
 from mv3dpose_ros.pose2d.estimator import PoseEstimator
-from mv3dpose_ros.pose2d.models import ModelNotFound, parse_size, resolve_model_path
+from mv3dpose_ros.pose2d.models import (fit_size, get_spec, model_file, ModelNotFound,
+                                        parse_size, resolve_model_path, size_tag)
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
@@ -58,6 +60,11 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import CompressedImage, Image
 
+#: Per-image stages timed in /diagnostics (medians): capture stamp -> receipt, receipt ->
+#: worker start (waiting behind the previous inference), CDR parse + numpy, letterbox,
+#: onnxruntime, NMS + inversion, message build + publish.
+STAGES = ('transport', 'wait', 'decode', 'pre', 'inference', 'post', 'publish')
+
 # name -> (default, description, dynamic)
 PARAMETERS = {
     'camera_id': ('', 'rig camera name written into every Person2DArray; empty = the last '
@@ -66,11 +73,18 @@ PARAMETERS = {
                                    '`mv3dpose model list`)', False),
     'model.path': ('', 'explicit ONNX file of a supported family (overrides model.name)', False),
     'model.family': ('auto', 'auto | yolo-pose | movenet-multipose (auto reads the ONNX)', False),
-    'model.input_size': ('', "N or HxW: picks the registered model's size; for models with "
-                             'dynamic input it sets the size (empty = default)', False),
+    'model.input_size': ('auto', 'auto: of the fetched sizes of the registered model, the one '
+                                 "that fits the first image's aspect (384x640 for 16:9, 640x384 "
+                                 "for portrait); N or HxW: that size; empty: the model's "
+                                 'default. For models with dynamic input it sets the size',
+                         False),
     'model.cache_dir': ('', 'model cache (empty = $MV3DPOSE_MODEL_DIR or '
                             '~/.cache/mv3dpose/models)', False),
-    'model.threads': (2, 'onnxruntime intra-op threads (0 = one per core)', False),
+    'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
+                         'of N cameras cores / N)', False),
+    'model.providers': ('auto', 'onnxruntime execution providers: auto (TensorRT, CUDA, '
+                                'OpenVINO, CPU: the first available) or a comma-separated list '
+                                'of tensorrt, cuda, openvino, cpu; CPU is the fallback', False),
     'score_threshold': (-1.0, '[DYNAMIC] minimum person score; < 0 = family default '
                               '(YOLO 0.25, MoveNet 0.2)', True),
     'keypoint_threshold': (0.0, '[DYNAMIC] keypoint confidences below this are published as 0',
@@ -116,6 +130,8 @@ class Pose2DNode(LifecycleNode):
         self._worker: Optional[threading.Thread] = None
         self._cv = threading.Condition()
         self._pending: Union[Image, bytes, None] = None
+        self._pending_ns = 0                 # steady clock when the pending image arrived
+        self._fit_pending = False            # model.input_size auto: choose at the first image
         self._stop = False
         self._stats_lock = threading.Lock()
         self._reset_stats()
@@ -137,6 +153,7 @@ class Pose2DNode(LifecycleNode):
         self._in_freq, self._out_freq = FrequencyStats(), FrequencyStats()
         self._stamps = TimestampStats()
         self._infer_ms, self._path_ms = WindowStats(), WindowStats()
+        self._stage_ms = {stage: WindowStats() for stage in STAGES}
         self._last_input_ns: Optional[int] = None
         self._rejects_reported = 0
 
@@ -163,34 +180,62 @@ class Pose2DNode(LifecycleNode):
         return SetParametersResult(successful=True)
 
     # -- lifecycle ------------------------------------------------------------------------------
+    def _open(self, path: str, input_size: Optional[Tuple[int, int]] = None) -> PoseEstimator:
+        """Open ``path`` with the node's parameters; log the provider and its options."""
+        thr = float(self._param('score_threshold'))
+        est = open_estimator(
+            path, family=self._param('model.family'), threads=int(self._param('model.threads')),
+            input_size=input_size, score_threshold=thr if thr >= 0 else None,
+            keypoint_threshold=float(self._param('keypoint_threshold')),
+            nms_iou=float(self._param('nms_iou')), max_people=int(self._param('max_people')),
+            providers=self._param('model.providers'))
+        for text in est.warnings:
+            self.get_logger().warning(f'camera {self.camera_id}: {text}')
+        options = ', '.join(f'{k}={v}' for k, v in sorted(est.provider_options.items()))
+        self.get_logger().info(
+            f'camera {self.camera_id}: {est.family} model {est.path} input '
+            f'{est.input_size[0]}x{est.input_size[1]} {est.precision} on {est.provider} '
+            f'({options or "default options"}), intra-op threads '
+            f'{self._param("model.threads") or "one per core"}, score>{est.score_threshold:g}; '
+            f'weights licence: {est.licence}')
+        return est
+
+    def _registered_path(self, size: Optional[Tuple[int, int]]) -> str:
+        return resolve_model_path(self._param('model.name'), size_tag(size) if size else None,
+                                  self._param('model.cache_dir') or None)
+
+    def _fetched_sizes(self) -> List[Tuple[int, int]]:
+        """Return the sizes of the registered model present in the cache, registry order."""
+        spec = get_spec(self._param('model.name'))
+        cache = self._param('model.cache_dir') or None
+        return [s for s in spec.sizes if os.path.isfile(model_file(spec.name, s, cache))]
+
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the model and create the publishers."""
         ns_last = self.get_namespace().strip('/').split('/')[-1]
         self.camera_id = self._param('camera_id') or ns_last or self.get_name()
+        size = str(self._param('model.input_size')).strip().lower()
+        self._fit_pending = False
         try:
             path = self._param('model.path')
-            if not path:
-                path = resolve_model_path(self._param('model.name'),
-                                          self._param('model.input_size') or None,
-                                          self._param('model.cache_dir') or None)
-            size = self._param('model.input_size')
-            thr = float(self._param('score_threshold'))
-            self.estimator = open_estimator(
-                path, family=self._param('model.family'),
-                threads=int(self._param('model.threads')),
-                input_size=parse_size(size) if size and self._param('model.path') else None,
-                score_threshold=thr if thr >= 0 else None,
-                keypoint_threshold=float(self._param('keypoint_threshold')),
-                nms_iou=float(self._param('nms_iou')), max_people=int(self._param('max_people')))
+            if path:
+                hw = parse_size(size) if size not in ('', 'auto') else None
+            elif size == 'auto':
+                spec = get_spec(self._param('model.name'))
+                have = self._fetched_sizes()
+                # Start on the default size (or any fetched); the first image picks the best.
+                hw = spec.default_size if spec.default_size in have or not have else have[0]
+                path = self._registered_path(hw)
+                self._fit_pending = True
+                hw = None
+            else:
+                path = self._registered_path(parse_size(size) if size else None)
+                hw = None
+            self.estimator = self._open(path, hw)
         except (ModelError, ModelNotFound, ValueError) as exc:
             self.error = str(exc)
             self.get_logger().error(f'cannot load the pose model: {exc}')
             return TransitionCallbackReturn.FAILURE
-        est = self.estimator
-        self.get_logger().info(
-            f'camera {self.camera_id}: {est.family} model {est.path} input '
-            f'{est.input_size[0]}x{est.input_size[1]} threads {self._param("model.threads")} '
-            f'score>{est.score_threshold:g}; weights licence: {est.licence}')
         out_qos = reliable_qos(int(self._param('output_qos.depth')))
         self._pub = self.create_publisher(Person2DArray, 'persons_2d', out_qos,
                                           event_callbacks=publisher_events(
@@ -277,10 +322,11 @@ class Pose2DNode(LifecycleNode):
     def _on_image(self, msg: Union[Image, bytes]) -> None:
         """Keep only the newest image; count the one it replaces as dropped."""
         now = self.get_clock().now().nanoseconds
+        arrived = time.time_ns()
         with self._cv:
             if self._pending is not None:
                 self.dropped += 1
-            self._pending = msg
+            self._pending, self._pending_ns = msg, arrived
             self.received += 1
             self._last_input_ns = now
             self._in_freq.tick()
@@ -294,20 +340,49 @@ class Pose2DNode(LifecycleNode):
                 if self._stop:
                     return
                 msg, self._pending = self._pending, None
+                arrived = self._pending_ns
             try:
-                self.process(msg)
+                self.process(msg, arrived)
             except Exception as exc:  # noqa: B902 - one bad frame must never stop the node
                 self.failed += 1
                 self._rl('failed', f'camera {self.camera_id}: inference failed: {exc!r}',
                          self.get_clock().now().nanoseconds)
 
-    def process(self, msg: Union[Image, bytes]) -> Optional[Person2DArray]:
+    def _fit_to(self, image_hw: Tuple[int, int]) -> None:
+        """At the first image: switch to the fetched input size that fits its aspect best."""
+        self._fit_pending = False
+        spec = get_spec(self._param('model.name'))
+        est = self.estimator
+        best = fit_size(spec.sizes, image_hw)
+        have = self._fetched_sizes()
+        usable = fit_size(have, image_hw) if have else tuple(est.input_size)
+        h, w = image_hw
+        if best != usable:
+            self.get_logger().warning(
+                f'camera {self.camera_id}: {w}x{h} images fit the {size_tag(best)} input of '
+                f'{spec.name} best (same detail, less padding, faster); it is not fetched: '
+                f'run `mv3dpose model fetch --model {spec.name} --size {size_tag(best)}`')
+        if usable == tuple(est.input_size):
+            self.get_logger().info(f'camera {self.camera_id}: input size '
+                                   f'{size_tag(usable)} kept for {w}x{h} images')
+            return
+        new = self._open(self._registered_path(usable))
+        for name in ('score_threshold', 'keypoint_threshold', 'nms_iou', 'max_people'):
+            setattr(new, name, getattr(est, name))      # dynamic values set since configure
+        self.estimator = new
+        self.get_logger().info(f'camera {self.camera_id}: input size {size_tag(usable)} chosen '
+                               f'for {w}x{h} images (model.input_size auto)')
+
+    def process(self, msg: Union[Image, bytes],
+                arrived_ns: Optional[int] = None) -> Optional[Person2DArray]:
         """
         Run the whole path on one image and publish; return the message (None if rejected).
 
-        ``msg`` is an ``Image`` or its serialised CDR bytes (what the raw subscription gets).
+        ``msg`` is an ``Image`` or its serialised CDR bytes (what the raw subscription gets);
+        ``arrived_ns`` the wall-clock time it was received (for the transport/wait stages).
         """
         t0 = time.perf_counter()
+        started_ns = time.time_ns()
         data = None
         if isinstance(msg, (bytes, bytearray, memoryview)):
             msg, data = decode_image_bytes(msg, self._compressed)
@@ -328,8 +403,18 @@ class Pose2DNode(LifecycleNode):
             self._rl('image', f'camera {self.camera_id}: image on '
                      f'{self.resolve_topic_name("image")} rejected: {exc}', now)
             return None
+        t_decoded = time.perf_counter()
+        if self._fit_pending:
+            try:
+                self._fit_to(image.shape[:2])
+            except (ModelError, ModelNotFound, ValueError) as exc:
+                self.get_logger().warning(f'camera {self.camera_id}: keeping input size '
+                                          f'{size_tag(self.estimator.input_size)}: {exc}')
+            t0 += time.perf_counter() - t_decoded          # a one-off, not image path time
+            t_decoded = time.perf_counter()
         est = self.estimator
         det = est.infer(image, order)
+        t_inferred = time.perf_counter()
         out = numpy_to_person2d_array(det.keypoints, msg.header, self.camera_id, image.shape[1],
                                       image.shape[0], self.layout.name, det.boxes, det.scores)
         pub = self._pub
@@ -342,13 +427,23 @@ class Pose2DNode(LifecycleNode):
                                 det.boxes, det.scores, self.layout.bones,
                                 float(self._param('debug_min_confidence')))
             debug.publish(numpy_to_image(drawn, msg.header, 'bgr8'))
-        elapsed = (time.perf_counter() - t0) * 1e3
+        t_end = time.perf_counter()
+        timing = est.last_timing
+        stages = {'decode': (t_decoded - t0) * 1e3, 'pre': timing.pre_ms,
+                  'inference': timing.infer_ms, 'post': timing.post_ms,
+                  'publish': (t_end - t_inferred) * 1e3}
+        if arrived_ns is not None:
+            # Capture stamp -> receipt; meaningful when the camera stamps with this clock.
+            stages['transport'] = (arrived_ns - stamp) / 1e6
+            stages['wait'] = (started_ns - arrived_ns) / 1e6
         with self._stats_lock:
             self.processed += 1
             self.people_last = len(det)
             self._out_freq.tick()
-            self._infer_ms.add(est.last_timing.infer_ms)
-            self._path_ms.add(elapsed)
+            self._infer_ms.add(timing.infer_ms)
+            self._path_ms.add((t_end - t0) * 1e3)
+            for name, ms in stages.items():
+                self._stage_ms[name].add(ms)
         return out
 
     # -- diagnostics ----------------------------------------------------------------------------
@@ -360,18 +455,23 @@ class Pose2DNode(LifecycleNode):
             ts_level, ts_text, ts_values = self._stamps.sample()
             infer50, infer95 = self._infer_ms.percentile(50), self._infer_ms.percentile(95)
             path50 = self._path_ms.percentile(50)
+            stage50 = {f'Stage {name} median (ms)': st.percentile(50)
+                       for name, st in self._stage_ms.items()}
         rate_in = in_values['Actual frequency (Hz)']
         values = {'Input frequency (Hz)': rate_in, **values, **ts_values,
                   'Inference latency median (ms)': infer50, 'Inference latency p95 (ms)': infer95,
-                  'Whole path median (ms)': path50, 'Images received': self.received,
-                  'Images processed': self.processed, 'Images dropped (newer arrived)':
-                  self.dropped, 'Rejected (encoding/size)': self.rejected_encoding,
+                  'Whole path median (ms)': path50, **stage50, 'Images received': self.received,
+                  'Images processed': self.processed,
+                  'Dropped before inference (newer image arrived)': self.dropped,
+                  'Rejected (encoding/size)': self.rejected_encoding,
                   'Rejected (zero stamp)': self.rejected_stamp, 'Inference failures': self.failed,
                   'People in last image': self.people_last}
         est = self.estimator
         if est is not None:
             values.update({'Model': est.path, 'Model family': est.family,
                            'Input size (HxW)': f'{est.input_size[0]}x{est.input_size[1]}',
+                           'Precision': est.precision, 'Execution provider': est.provider,
+                           'Intra-op threads': int(self._param('model.threads')),
                            'Weights licence': est.licence})
         level, text = OK, out_text
         rejects = self.rejected_encoding + self.failed
@@ -393,7 +493,10 @@ class Pose2DNode(LifecycleNode):
               and level_value(level) == level_value(OK)):
             level, text = WARN, f'output rate below {min_rate:g} Hz'
         elif self.dropped and level_value(level) == level_value(OK):
-            text = f'{out_text}; dropping frames (inference slower than the input)'
+            share = 100.0 * self.dropped / max(1, self.received)
+            text = (f'{out_text}; inference slower than the input: {self.dropped} of '
+                    f'{self.received} images ({share:.0f} %) dropped before inference, '
+                    'newest kept')
         return [make_status(self._diag.name(f'{self.camera_id} inference'), level, text,
                             hardware_id=self.camera_id, values=values)]
 
