@@ -28,7 +28,7 @@ play    publishes the raw bytes at the recorded pace (``--rate``), each preceded
         follow the bag; ``--loop`` makes the clock jump back, which the fusion node treats as
         a reset.
 info    prints topics, types, counts, QoS, duration and storage, after checking every chunk
-        CRC (``--no-verify`` skips that).
+        CRC and decoding every message (``--no-verify`` skips that).
 recover salvages interrupted recordings (``.NAME.partial-PID`` of dead processes) into bags.
 """
 
@@ -41,7 +41,8 @@ import sys
 import time
 from typing import Dict, Iterable, List, Optional, Sequence
 
-from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, partial_dirs
+from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, check_bag, DEFAULT_STORAGE
+from mv3dpose_ros.io.bag import partial_dirs
 from mv3dpose_ros.io.bag import salvage, STORAGES, verify_bag
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
@@ -466,9 +467,12 @@ def info(path: str, verify: bool = False) -> dict:
     """
     Return a summary of the bag at ``path`` (what ``mv3dpose bag info`` prints).
 
-    ``verify`` also checks every chunk / message CRC (reads the whole bag once).
+    ``verify`` also checks every chunk / message CRC and decodes every message (reads the
+    whole bag once).
     """
-    integrity = verify_bag(path) if verify else 'not verified (--no-verify)'
+    integrity = 'not verified (--no-verify)'
+    if verify:
+        integrity = f'{verify_bag(path)}; {check_bag(path)} messages decode'
     with BagReader(path) as reader:
         return {
             'integrity': integrity,
@@ -593,7 +597,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     inf.add_argument('bag', help='bag directory or .mcap / .db3 file')
     inf.add_argument('--json', action='store_true', help='print JSON instead of text')
     inf.add_argument('--no-verify', dest='verify', action='store_false',
-                     help='skip the CRC check of every chunk / message (fast on huge bags)')
+                     help='skip checking the CRC and decoding of every message (fast on huge '
+                          'bags)')
 
     rcv = sub.add_parser('recover', help='salvage an interrupted recording (.NAME.partial-PID) '
                                          'into a bag')

@@ -260,6 +260,7 @@ def _load_rig(path: str, data: Any) -> Dict[str, Camera]:
         if entry.get('intrinsics_file'):
             ipath = os.path.join(base, os.path.expanduser(str(entry['intrinsics_file'])))
             info = _camera_info(_parse(ipath, 'yaml'), ipath, camera=name)
+            _camera(ipath, R=np.eye(3), t=np.zeros(3), **info)   # its errors name ipath
             fields.update(K=info['K'], dist=info['dist'], width=info['width'],
                           height=info['height'])
         if 'K' in entry:

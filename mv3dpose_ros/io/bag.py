@@ -818,6 +818,9 @@ def salvage(source: PathLike, output: PathLike, overwrite: bool = False) -> Salv
         except (sqlite3.Error, ValueError, TypeError) as exc:
             raise BagError(f'{store}: cannot read the partial sqlite3 bag: {exc}') from None
         storage = 'sqlite3'
+    if not topics:
+        raise BagError(f'{store}: nothing to salvage (no intact topic record; '
+                       f'{lost} bytes unreadable)')
     counts: Dict[str, int] = {}
     with BagWriter(output, storage=storage, overwrite=overwrite) as writer:
         for tid, (topic, msgtype, qos) in topics.items():

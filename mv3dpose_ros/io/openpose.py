@@ -45,6 +45,8 @@ _KEYS = ('pose_keypoints_2d', 'pose_keypoints')   # the second one: OpenPose < 1
 MAX_FILE_BYTES = 16 * 1024 * 1024
 #: Largest plausible |x| or |y| [px]; beyond it a file is corrupt.
 MAX_COORDINATE = 1e6
+#: Confidences up to this are read (and clipped to 1); beyond it a file is corrupt.
+MAX_CONFIDENCE = 1.1
 _DIGITS = re.compile(r'(\d+)')
 
 
@@ -121,6 +123,12 @@ def parse_openpose(data: object, num_joints: Optional[int] = None) -> np.ndarray
         k, j = np.argwhere(far)[0]
         raise OpenPoseFormatError(f'people[{k}] keypoint {j} at ({arr[k, j, 0]:.3g}, '
                                   f'{arr[k, j, 1]:.3g}) px, beyond +-{MAX_COORDINATE:g}')
+    over = finite & (arr[..., 2] > MAX_CONFIDENCE)
+    if over.any():
+        k, j = np.argwhere(over)[0]
+        raise OpenPoseFormatError(f'people[{k}] keypoint {j} has confidence {arr[k, j, 2]:.3g}, '
+                                  f'beyond [0, 1]')
+    arr[..., 2] = np.minimum(arr[..., 2], 1.0)    # heatmap peaks may exceed 1 a little
     bad = ~finite | (arr[..., 2] <= 0)
     arr[bad] = 0.0
     return arr
