@@ -179,6 +179,11 @@ class Plan:
                          'camera_ids': self.cameras,
                          'input_topic': ns_pattern.rstrip('/') + '/persons_2d'}
         overrides['/**/fusion_node'] = {'ros__parameters': _nest(fusion_params)}
+        if args.foxglove is not None:     # the live web view (nodes/foxglove_view.py)
+            overrides['/**/foxglove_view'] = {'ros__parameters': {
+                'rig_config': self.rig_path, 'camera_ids': list(self.cameras),  # no YAML alias
+                'port': args.foxglove,
+                'detections_topic': ns_pattern.rstrip('/') + '/persons_2d'}}
         if args.use_sim_time:
             overrides['/**'] = {'ros__parameters': {'use_sim_time': True}}
         self.overrides = overrides
@@ -199,6 +204,8 @@ class Plan:
                 out[f'pose2d_node[{cam}]'] = argv + files
         if not self.args.no_fusion:
             out['fusion_node'] = _executable('fusion_node') + ['--ros-args'] + files
+        if self.args.foxglove is not None:
+            out['foxglove_view'] = _executable('foxglove_view') + ['--ros-args'] + files
         return out
 
 
@@ -368,6 +375,9 @@ def build_parser() -> argparse.ArgumentParser:
                    'come from elsewhere, e.g. a bag or other hosts)')
     p.add_argument('--no-fusion', action='store_true', help='start the pose2d_nodes only '
                    '(fusion_node runs on another host)')
+    p.add_argument('--foxglove', type=int, nargs='?', const=8765, default=None,
+                   metavar='PORT', help='also start the live web view (mv3dpose_foxglove_view) '
+                   'on ws://127.0.0.1:PORT (default 8765)')
     p.add_argument('--respawn', action='store_true', help='restart nodes that exit')
     p.add_argument('--stop-timeout', type=float, default=10.0,
                    help='seconds to wait after SIGINT before SIGTERM (default 10)')
