@@ -77,6 +77,27 @@ def test_track_round_trip_through_message():
     assert np.all(np.isnan(back.velocity))
 
 
+def test_uncertainty_and_exact_stamps_reach_the_message_and_come_back():
+    track = _track()
+    track.joint_variance = np.array([1e-4, np.nan, 4e-4, 9e-4])
+    track.position_covariance = np.eye(3) * 2.5e-4
+    track.first_seen_ns = 1_700_000_000_123_456_789
+    track.last_observed_ns = 1_700_000_001_987_654_321
+    msg = tracks_to_msg([track], Header(frame_id='map'), 'coco17')
+    skel = msg.skeletons[0]
+    assert list(skel.position_covariance) == pytest.approx((np.eye(3) * 2.5e-4).ravel().tolist())
+    assert [j.position_variance for j in skel.joints] == pytest.approx([1e-4, -1, 4e-4, 9e-4])
+    assert stamp_to_ns(skel.first_seen) == 1_700_000_000_123_456_789
+    assert stamp_to_ns(skel.last_observed) == 1_700_000_001_987_654_321
+    back = msg_to_tracks(msg)[0]
+    np.testing.assert_allclose(back.joint_variance, [1e-4, np.nan, 4e-4, 9e-4], rtol=1e-6)
+    np.testing.assert_allclose(back.position_covariance, np.eye(3) * 2.5e-4)
+    assert back.last_observed_ns == 1_700_000_001_987_654_321
+    track.position_covariance = np.full((3, 3), np.nan)        # unknown: [0] = -1, no NaN
+    skel = tracks_to_msg([track], Header(), 'coco17').skeletons[0]
+    assert skel.position_covariance[0] == -1.0 and np.isfinite(skel.position_covariance).all()
+
+
 def test_person2d_round_trip_and_missing_joints():
     rng = np.random.default_rng(0)
     poses = np.concatenate([rng.uniform(0, 500, (3, 17, 2)), rng.uniform(0.1, 1, (3, 17, 1))],

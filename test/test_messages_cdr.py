@@ -333,7 +333,13 @@ def random_track(rng, joints) -> Track:
         first_seen=float(rng.choice([rng.uniform(-5, 2e9), np.nan, np.inf])),
         last_observed=float(rng.uniform(0, 2e9)), age=int(rng.integers(0, 2**32)),
         missed=int(rng.integers(0, 100)), score=float(_with_specials(rng, [rng.random()])[0]),
-        source_cameras=tuple(_text(rng) for _ in range(rng.integers(0, 17))))
+        source_cameras=tuple(_text(rng) for _ in range(rng.integers(0, 17))),
+        joint_variance=(None if rng.random() < 0.2 else
+                        _with_specials(rng, rng.uniform(-1e-3, 0.1, joints))),
+        position_covariance=(None if rng.random() < 0.2 else _with_specials(
+            rng, np.eye(3) * rng.uniform(-1e-3, 0.1), 0.05)),
+        first_seen_ns=None if rng.random() < 0.3 else int(rng.integers(0, 2**62)),  # odd too
+        last_observed_ns=None if rng.random() < 0.3 else int(rng.integers(0, 2**31 * 10**9)))
 
 
 def test_tracks_to_cdr_equals_serialised_tracks_to_msg():
@@ -355,5 +361,11 @@ def test_tracks_to_cdr_equals_serialised_tracks_to_msg():
         assert len(got['skeletons']) == len(tracks)
         assert [len(s['joints']) for s in got['skeletons']] == joints
         floats = [v for sk in got['skeletons'] for j in sk['joints']
-                  for v in (*j['position'].values(), j['confidence'], j['reprojection_error'])]
+                  for v in (*j['position'].values(), j['confidence'], j['reprojection_error'],
+                            j['position_variance'])]
+        floats += [v for sk in got['skeletons'] for v in sk['position_covariance']]
         assert all(math.isfinite(v) for v in floats)
+        for track, sk in zip(tracks, got['skeletons']):
+            if track.last_observed_ns is not None:          # exact, not via float seconds
+                stamp = sk['last_observed']
+                assert stamp['sec'] * 10**9 + stamp['nanosec'] == track.last_observed_ns

@@ -206,23 +206,16 @@ def live_output(frames: Iterator[Tuple[int, float, list]], config, lag_frames: O
     ``lag_frames`` None: ``~/tracks``; else ``~/tracks_smoothed`` with that lag (the frames
     still held at the end are flushed).
     """
-    from mv3dpose_ros.core.output import TrackPublisher
-    from mv3dpose_ros.core.smoothing import FixedLagSmoother
+    from mv3dpose_ros.core.output import LiveOutput
 
-    publisher = TrackPublisher(publish_coast_s=config.publish_coast_s)
-    smoother = None
-    if lag_frames is not None:
-        smoother = FixedLagSmoother(lag_frames, root_joints=root_joints)
+    output = LiveOutput(config.publish_coast_s, lag=lag_frames or 0, root_joints=root_joints)
     for frame, stamp, tracks in frames:
-        published = publisher.publish(tracks, stamp)
-        if smoother is None:
+        published, done = output.step(tracks, stamp, frame)
+        if not lag_frames:                 # causal, or a lag of 0 (the same stream)
             yield frame, stamp, published
-            continue
-        done = smoother.push(frame, stamp, published)
-        if done is not None:
+        elif done is not None:
             yield done
-    if smoother is not None:
-        yield from smoother.flush()
+    yield from output.flush()
 
 
 def run(args) -> int:

@@ -20,10 +20,13 @@ normalise every keypoint once, associate poses across views with cameras taken i
 wide-angle-first order (``core.association``), triangulate with a reprojection gate, undo
 single-view left/right swaps, reject implausible bones (``core.triangulation``), merge or
 suppress duplicate 3D candidates, and track (``core.tracking``) with per-joint Kalman filters
-(``core.smoothing.JointKalman``) whose measurement variance comes from the geometry: the
-normalised pixel noise (``measurement_noise_norm``, raised by the joint's reprojection error)
-times its depth in the cameras that saw it, divided by their number. The live node and the
-offline command both call it, so their results agree frame for frame.
+(``core.smoothing.JointKalman``) whose measurement variance comes from the geometry: the 2D
+noise per view in normalised units, times the joint's depth in the cameras that saw it,
+squared, divided by their number. The 2D noise is estimated from the data as it comes in
+(``noise_gain`` times a running mean of the per-set median reprojection error, corrected for
+the degrees of freedom of the views), starting from ``measurement_noise_norm``: the filters
+smooth as much as the detector's noise on this rig calls for, on any data set. The live node
+and the offline command both call it, so their results agree frame for frame.
 
 A new track that is well supported (``confirm_at_birth_ratio`` of the layout's joints
 triangulated from at least min(3, cameras) views) is CONFIRMED from its first frame; others
@@ -106,11 +109,10 @@ class FusionConfig:
     # per-joint Kalman filters (always run: the tracker's motion comes from them)
     smoothing: str = 'causal'               # output 'causal' (filtered joints) or 'none'
     #                                         (accepted raw triangulations, held in gaps)
-    measurement_noise_norm: float = 0.008   # 2D noise per view (px / focal) behind the 3D
-    #                                         measurement variance
-    reprojection_noise_gain: float = 1.0    # a joint's 2D noise^2 = measurement_noise_norm^2
-    #                                         + gain * (its mean reprojection error)^2
-    accel_noise: float = 2.0                # white acceleration noise density [m^2/s^3]
+    measurement_noise_norm: float = 0.008   # 2D noise per view (px / focal) until estimated
+    noise_gain: float = 1.5                 # 2D noise = gain * the noise estimated from the
+    #                                         reprojection errors (0: measurement_noise_norm)
+    accel_noise: float = 1.0                # white acceleration noise density [m^2/s^3]
     innovation_gate_chi2: float = 16.3      # reject an observation beyond this (3 dof, 99.9 %)
     reinit_after: int = 2                   # consecutive rejections before a joint restarts
     max_gap_s: float = 0.3                  # joints are held for at most this long
@@ -122,7 +124,7 @@ class FusionConfig:
         non_negative = ('min_joint_confidence', 'swap_ratio', 'merge_distance_m',
                         'min_birth_view_ratio', 'tracking_gate_growth_mps',
                         'tracking_recovery_gate_m', 'max_coast_s', 'max_gap_s',
-                        'confirm_at_birth_ratio', 'publish_coast_s', 'reprojection_noise_gain')
+                        'confirm_at_birth_ratio', 'publish_coast_s', 'noise_gain')
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
                         'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
                         'min_birth_cameras_in_view', 'reinit_after')
@@ -153,6 +155,7 @@ class Fusion:
         """Precompute the rig geometry (essential matrices once per camera pair)."""
         self.config = config if config is not None else FusionConfig()
         self.config.validate()
+        cfg = self.config
         if len(cameras) < 2:
             raise ValueError(f'Fusion needs at least two cameras, got {len(cameras)}: '
                              f'{sorted(cameras)}')
@@ -195,6 +198,8 @@ class Fusion:
             max_gap_s=cfg.max_gap_s))
         self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
         self._strong_views = min(3, num_c)
+        self._noise_views = min(3, num_c)         # 2-view residuals say little about noise
+        self._noise_est, self._noise_sets = cfg.measurement_noise_norm, 0
         self._confirm_joints = cfg.confirm_at_birth_ratio * lay.num_joints
         self._last_stamp: Optional[float] = None
         self._warned: Set[str] = set()
@@ -253,17 +258,42 @@ class Fusion:
             well_seen = (tri.num_views[rows] >= self._strong_views).sum(axis=1)
             return well_seen >= self._confirm_joints
 
+        self._estimate_noise(tri)
         variance = self.measurement_variance(tri)
         upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns)
         return self._outputs(upd, tri, members, variance, stamp) + tombs \
             + self._tombstones(upd.deleted)
 
+    @property
+    def noise_norm(self) -> float:
+        """Return the 2D noise per view (normalised units) behind the measurement variance."""
+        cfg = self.config
+        if cfg.noise_gain <= 0 or self._noise_sets == 0:
+            return cfg.measurement_noise_norm
+        return cfg.noise_gain * self._noise_est
+
+    def _estimate_noise(self, tri: Triangulation) -> None:
+        """Fold this set's median reprojection error into the running 2D noise estimate."""
+        n = tri.num_views
+        ok = (n >= self._noise_views) & np.isfinite(tri.error)
+        if self.config.noise_gain <= 0 or ok.sum() < 5:
+            return
+        # DLT from n views leaves 2n - 3 of 2n degrees of freedom in the residuals; the median
+        # of a 2D Gaussian error's length is 1.177 sigma.
+        k = n[ok]
+        sigma = float(np.median(tri.error[ok] / np.sqrt((2 * k - 3) / (2 * k)))) / 1.177
+        self._noise_sets += 1
+        if self._noise_sets == 1:
+            self._noise_est = sigma
+        else:
+            self._noise_est += (sigma - self._noise_est) / min(self._noise_sets, 200)
+
     def measurement_variance(self, tri: Triangulation) -> np.ndarray:
         """
         Return the ``[K, J]`` per-axis variance [m^2] of triangulated joints (NaN if none).
 
-        (noise^2 + gain * reprojection error^2) * mean depth^2 / views (normalised units): a
-        joint far from its cameras, seen by few of them or fitting them badly is uncertain.
+        noise^2 * mean depth^2 / views (``noise_norm``, normalised units): a joint far from
+        its cameras or seen by few of them is uncertain.
         """
         if not len(tri.joints):
             return np.zeros(tri.joints.shape[:2])
@@ -273,10 +303,7 @@ class Fusion:
         n = tri.num_views
         with np.errstate(invalid='ignore', divide='ignore'):
             mean_depth = np.where(used, depth, 0.0).sum(axis=-1) / n
-            err = np.where(np.isfinite(tri.error), tri.error, 0.0)
-            var = (self.config.measurement_noise_norm ** 2
-                   + self.config.reprojection_noise_gain * err * err) \
-                * mean_depth * mean_depth / n
+            var = self.noise_norm ** 2 * mean_depth * mean_depth / n
         return np.where(np.isfinite(tri.joints[..., 0]), np.maximum(var, _MIN_VARIANCE), np.nan)
 
     @property

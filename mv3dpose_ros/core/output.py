@@ -17,7 +17,8 @@ What a live consumer sees of ``Fusion.step``: the publication rules and public t
 
 ``Fusion.step`` reports every track it keeps (internal ids). ``TrackPublisher`` turns that
 into the published stream, shared by ``fusion_node`` (``~/tracks``) and ``mv3dpose track
---smooth causal``:
+--smooth causal`` (``LiveOutput`` adds the fixed-lag stream, ``~/tracks_smoothed`` and
+``--smooth fixed-lag``):
 
 - CONFIRMED tracks are published; TENTATIVE ones only with ``publish_tentative``;
 - a COASTING track is published for at most ``publish_coast_s`` after its last observation,
@@ -28,8 +29,9 @@ into the published stream, shared by ``fusion_node`` (``~/tracks``) and ``mv3dpo
 """
 
 import dataclasses
-from typing import Dict, Iterable, List
+from typing import Dict, Iterable, List, Optional, Tuple
 
+from mv3dpose_ros.core.smoothing import FixedLagSmoother
 from mv3dpose_ros.core.types import Track, TrackState
 
 
@@ -79,3 +81,37 @@ class TrackPublisher:
                for t in tombstones if t.track_id in self._public]
         self._public.clear()
         return out
+
+
+class LiveOutput:
+    """
+    The live outputs of one ``Fusion``: ``~/tracks`` and, with ``lag > 0``, the fixed-lag one.
+
+    ``step`` takes one ``Fusion.step`` result and returns the published tracks and, once the
+    window is full, the smoothed set ``lag`` steps back (``FixedLagSmoother``), as
+    ``(key, stamp, tracks)`` with the key (frame number, or stamp in ns) it was given then.
+    ``fusion_node`` and ``mv3dpose track`` both run exactly this.
+    """
+
+    def __init__(self, publish_coast_s: float = 0.1, publish_tentative: bool = False,
+                 lag: int = 0, root_joints: Optional[Tuple[int, int]] = None) -> None:
+        """Create the publisher and, for ``lag > 0``, the fixed-lag smoother."""
+        self.publisher = TrackPublisher(publish_tentative, publish_coast_s)
+        self.smoother = FixedLagSmoother(lag, root_joints=root_joints) if lag > 0 else None
+
+    def step(self, tracks: Iterable[Track], stamp: float, key: object = None
+             ) -> Tuple[List[Track], Optional[Tuple[object, float, List[Track]]]]:
+        """Return ``(published tracks, smoothed set or None)`` for one set at ``stamp`` s."""
+        published = self.publisher.publish(tracks, stamp)
+        if self.smoother is None:
+            return published, None
+        return published, self.smoother.push(key, stamp, published)
+
+    def flush(self) -> List[Tuple[object, float, List[Track]]]:
+        """Return the smoothed sets still held (end of input)."""
+        return self.smoother.flush() if self.smoother is not None else []
+
+    def reset(self, tombstones: Iterable[Track] = ()
+              ) -> Tuple[List[Track], List[Tuple[object, float, List[Track]]]]:
+        """Forget all tracks: the published tombstones (public ids) and the held sets."""
+        return self.publisher.reset(tombstones), self.flush()

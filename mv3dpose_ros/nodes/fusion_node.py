@@ -43,6 +43,7 @@ from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+from mv3dpose_ros.core.output import LiveOutput
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout, LAYOUT_NAMES
 from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig, SyncedSet
 from mv3dpose_ros.core.types import Track, TrackState
@@ -154,6 +155,11 @@ class FusionNode(Node):
         logging.getLogger('mv3dpose_ros').addHandler(self._log_handler)
 
         self.tracks_pub = self._publisher(TrackedSkeletonArray, '~/tracks', reliable_qos(10))
+        # Fixed-lag output (core.output.LiveOutput): each set smoothed_lag_frames sets later.
+        self.smoothed_pub = None
+        if self.smoothed_lag_frames > 0:
+            self.smoothed_pub = self._publisher(TrackedSkeletonArray, '~/tracks_smoothed',
+                                                reliable_qos(10))
         self.markers_pub = self._publisher(MarkerArray, '~/markers', reliable_qos(5))
         self.info_pub = self._publisher(SkeletonInfo, '~/skeleton_info', latched_qos())
         self.info_pub.publish(skeleton_info_msg(self.layout, Header(frame_id=self.world_frame)))
@@ -170,7 +176,7 @@ class FusionNode(Node):
         self._last_set_anchor_ns = 0                     # stamp of the last real set
         self._drops_reported: Dict[str, int] = {}
         self._clock_seen = (self._now_ns(), steady_ns())   # node clock value, steady at change
-        self._published_ids: set = set()
+        self.output = self._new_output()
         self.latency = WindowStats()
         self.processing = WindowStats()
         self.output_rate = FrequencyStats()
@@ -255,6 +261,9 @@ class FusionNode(Node):
         P.declare_dataclass(self, FusionConfig, 'fusion', read_only=True)
         d(self, 'publish_tentative', False, 'Also publish TENTATIVE (unconfirmed) tracks',
           dynamic=True)
+        d(self, 'smoothed_lag_frames', 3, 'Lag L [sets] of ~/tracks_smoothed: each set is '
+          'published smoothed L sets later, stamped with its own capture time; 0 = off',
+          read_only=True)
         d(self, 'input_max_future_s', 2.0, 'Drop inputs stamped more than this [s] ahead of '
           'the node clock (skipped while the clock is zero)', read_only=True)
         d(self, 'log_throttle_s', 5.0, 'Rate limit [s] of repeated warnings per camera and '
@@ -344,6 +353,9 @@ class FusionNode(Node):
             raise ConfigError(f'limits.max_persons ({self.max_persons}) must be >= 1 and '
                               f'limits.max_message_bytes ({self.max_message_bytes}) >= 64')
         self.max_future_ns = int(float(v('input_max_future_s')) * NS_PER_S)
+        self.smoothed_lag_frames = int(v('smoothed_lag_frames'))
+        if self.smoothed_lag_frames < 0:
+            raise ConfigError(f'smoothed_lag_frames must be >= 0, got {self.smoothed_lag_frames}')
         self.log_throttle_s = float(v('log_throttle_s'))
         self.diagnostics_period_s = float(v('diagnostics.period_s'))
         self._read_dynamic()
@@ -351,6 +363,8 @@ class FusionNode(Node):
     def _read_dynamic(self) -> None:
         v = self._value
         self.publish_tentative = bool(v('publish_tentative'))
+        if getattr(self, 'output', None) is not None:
+            self.output.publisher.publish_tentative = self.publish_tentative
         self.silent_warn_ns = int(float(v('diagnostics.silent_warn_s')) * NS_PER_S)
         self.clock_stall_ns = int(float(v('diagnostics.clock_stall_s')) * NS_PER_S)
         self.expected_rate_hz = float(v('diagnostics.expected_rate_hz'))
@@ -598,11 +612,12 @@ class FusionNode(Node):
         if not from_sync:
             self.sync.reset()
         tombs = self.fusion.reset() if self.fusion is not None else []
-        tombs = [t for t in tombs if t.track_id in self._published_ids]
-        self._published_ids.clear()
+        tombs, held = self.output.reset(tombs)
+        self._publish_smoothed(held)
         self.last_tracks = []
         if tombs and self._last_set_ns is not None:
             self._publish(tombs, self._last_set_ns)
+            self._publish_smoothed([(self._last_set_ns, 0.0, tombs)])
         self._last_set_ns = None
         self._last_set_node_ns = None
 
@@ -619,29 +634,37 @@ class FusionNode(Node):
         """Run ``Fusion.step`` and publish; return False when the core failed (counted)."""
         t0 = time.perf_counter()
         try:
-            tracks = self.fusion.step(views, stamp_ns / NS_PER_S)
+            tracks = self.fusion.step(views, stamp_ns / NS_PER_S, stamp_ns)
         except Exception as exc:  # noqa: B902 - a core failure must not stop the node
             self.counts['fusion_errors'] += 1
             self._rlog('fusion_error', f'Fusion.step failed on the set at '
                        f'{stamp_ns / NS_PER_S:.6f} s ({exc!r}); tracks reset')
             self.fusion.reset()
-            self._published_ids.clear()
+            self._publish_smoothed(self.output.reset()[1])
             return False
         if not idle:
             self.processing.add(time.perf_counter() - t0)
         self.last_tracks = [t for t in tracks if t.state != TrackState.DELETED]
-        out = []
-        for t in tracks:
-            if t.state == TrackState.DELETED:
-                if t.track_id in self._published_ids:
-                    self._published_ids.discard(t.track_id)
-                    out.append(t)
-            elif t.state != TrackState.TENTATIVE or self.publish_tentative:
-                self._published_ids.add(t.track_id)
-                out.append(t)
+        out, smoothed = self.output.step(tracks, stamp_ns / NS_PER_S, stamp_ns)
         self._publish(out, stamp_ns, latency=not idle)
+        self._publish_smoothed([smoothed] if smoothed is not None else [])
         self._last_set_ns = stamp_ns
         return True
+
+    def _new_output(self) -> LiveOutput:
+        try:
+            root = self.layout.root_joints
+        except ValueError:
+            root = None
+        return LiveOutput(self.fusion_config.publish_coast_s, self.publish_tentative,
+                          self.smoothed_lag_frames, root)
+
+    def _publish_smoothed(self, sets: List[Any]) -> None:
+        """Publish fixed-lag sets ``(stamp_ns, stamp, tracks)``, each with its own stamp."""
+        for stamp_ns, _, tracks in sets:
+            if self.smoothed_pub is not None:
+                header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)
+                self.smoothed_pub.publish(tracks_to_cdr(tracks, header, self.layout.name))
 
     def _publish(self, tracks: List[Track], stamp_ns: int, latency: bool = True) -> None:
         header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.world_frame)

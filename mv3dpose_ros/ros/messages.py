@@ -302,14 +302,17 @@ def _finite(value: float, default: float = 0.0) -> float:
     return value if math.isfinite(value) else default
 
 
-def _split_stamp(sec: float) -> Tuple[int, int]:
-    """Return ``sec_to_stamp(sec)`` as ``(sec, nanosec)`` without building a message."""
+def _split_stamp(sec: float, ns: Optional[int] = None) -> Tuple[int, int]:
+    """Return the stamp as ``(sec, nanosec)``: ``ns`` exactly when given, else ``sec`` rounded."""
+    if ns is not None:                    # a Time holds int32 seconds: else unknown (0)
+        return divmod(int(ns), 1_000_000_000) if 0 <= ns < _NS_LIMIT else (0, 0)
     if not math.isfinite(sec):
         return 0, 0
     return divmod(round(sec * 1e9), 1_000_000_000)
 
 
 F32_MAX = float(np.finfo(np.float32).max)
+_NS_LIMIT = 2**31 * 1_000_000_000
 
 
 class _TrackFields(NamedTuple):
@@ -325,6 +328,7 @@ class _TrackFields(NamedTuple):
     position: List[float]                    # zeros when not finite
     velocity: List[float]                    # zeros unless velocity_valid
     velocity_valid: bool
+    covariance: Tuple[float, ...]            # 9 values; _COVARIANCE_UNKNOWN when not finite
     source_cameras: Tuple[str, ...]
 
 
@@ -336,6 +340,7 @@ class _JointFields(NamedTuple):
     state: np.ndarray           # [T, J] uint8, MISSING where unusable
     num_views: np.ndarray       # [T, J] uint8, 0 where MISSING
     error: np.ndarray           # [T, J] float64 px, -1 where not applicable
+    variance: np.ndarray        # [T, J] float64 m^2 per axis, -1 where unknown
 
 
 def _track_fields(track: Track) -> _TrackFields:
@@ -343,14 +348,20 @@ def _track_fields(track: Track) -> _TrackFields:
     root = np.asarray(track.position, dtype=np.float64).tolist()
     vel = np.asarray(track.velocity, dtype=np.float64).tolist()
     vel_ok = all(map(math.isfinite, vel))
+    cov = _COVARIANCE_UNKNOWN
+    if track.position_covariance is not None:
+        c = np.asarray(track.position_covariance, dtype=np.float64).reshape(-1)
+        if c.size == 9 and (np.abs(c) <= F32_MAX).all() and c[0] >= 0:
+            cov = tuple(c.tolist())
     return _TrackFields(
         track_id=int(track.track_id), state=int(track.state),
         confidence=min(max(_finite(track.score), 0.0), 1.0),
-        first_seen=_split_stamp(track.first_seen),
-        last_observed=_split_stamp(track.last_observed), age=int(track.age),
+        first_seen=_split_stamp(track.first_seen, track.first_seen_ns),
+        last_observed=_split_stamp(track.last_observed, track.last_observed_ns),
+        age=int(track.age),
         missed=int(track.missed),
         position=root if all(map(math.isfinite, root)) else [0.0, 0.0, 0.0],
-        velocity=vel if vel_ok else [0.0, 0.0, 0.0], velocity_valid=vel_ok,
+        velocity=vel if vel_ok else [0.0, 0.0, 0.0], velocity_valid=vel_ok, covariance=cov,
         source_cameras=tuple(track.source_cameras))
 
 
@@ -362,6 +373,10 @@ def _joint_fields(tracks: Sequence[Track]) -> _JointFields:
     conf = np.array([t.confidence for t in tracks], dtype=np.float64).reshape(num, -1)
     err = np.array([t.reprojection_error for t in tracks], dtype=np.float64).reshape(num, -1)
     views = np.array([t.num_views for t in tracks]).reshape(num, -1)
+    var = np.array([t.joint_variance if t.joint_variance is not None
+                    else np.full(len(t.joint_state), np.nan) for t in tracks],
+                   dtype=np.float64).reshape(num, -1)
+    var[~((var >= 0) & (var <= F32_MAX))] = -1.0     # NaN, negative, inf, beyond float32
     usable = (states != JointState.MISSING) & np.isfinite(xyz).all(axis=-1)
     conf = np.clip(conf, 0.0, 1.0)            # NaN stays NaN, +-inf -> 1 / 0
     err[~(np.abs(err) <= F32_MAX)] = -1.0        # NaN, inf and what float32 cannot hold
@@ -370,7 +385,7 @@ def _joint_fields(tracks: Sequence[Track]) -> _JointFields:
         confidence=np.where(usable & ~np.isnan(conf), conf, 0.0),
         state=np.where(usable, states, np.uint8(JointState.MISSING)).astype(np.uint8),
         num_views=np.where(usable, views.astype(np.int64).clip(0, 255), 0).astype(np.uint8),
-        error=np.where(usable, err, -1.0))
+        error=np.where(usable, err, -1.0), variance=np.where(usable, var, -1.0))
 
 
 def _all_joint_fields(tracks: Sequence[Track]) -> List[_JointFields]:
@@ -393,12 +408,12 @@ def _skeleton_msg(f: _TrackFields, j: _JointFields) -> TrackedSkeleton:
     msg.position = Point(x=x, y=y, z=z)
     x, y, z = f.velocity
     msg.velocity = Vector3(x=x, y=y, z=z)
-    msg.position_covariance = _COVARIANCE_UNKNOWN
+    msg.position_covariance = f.covariance
     msg.joints = [Joint3D(position=Point(x=x, y=y, z=z), confidence=c, state=s, num_views=v,
-                          reprojection_error=e)
-                  for (x, y, z), c, s, v, e in zip(j.xyz.tolist(), j.confidence.tolist(),
-                                                   j.state.tolist(), j.num_views.tolist(),
-                                                   j.error.tolist())]
+                          reprojection_error=e, position_variance=pv)
+                  for (x, y, z), c, s, v, e, pv in zip(
+                      j.xyz.tolist(), j.confidence.tolist(), j.state.tolist(),
+                      j.num_views.tolist(), j.error.tolist(), j.variance.tolist())]
     return msg
 
 
@@ -422,11 +437,11 @@ _COVARIANCE_UNKNOWN = (-1.0,) + (0.0,) * 8
 # velocity_valid, position_covariance, len(joints).
 _SKELETON_HEAD = struct.Struct('<QB3xfiIiIII3d3d?7x9dI')
 _STAMP = struct.Struct('<iI')
-# One Joint3D from an 8-aligned start; the next one starts 40 bytes on (the last has 36).
+# One Joint3D from an 8-aligned start: 40 bytes, no padding (the next one starts right after).
 _JOINT3D = np.dtype({'names': ['position', 'confidence', 'state', 'num_views',
-                               'reprojection_error'],
-                     'formats': [('<f8', (3,)), '<f4', 'u1', 'u1', '<f4'],
-                     'offsets': [0, 24, 28, 29, 32], 'itemsize': 40})
+                               'reprojection_error', 'position_variance'],
+                     'formats': [('<f8', (3,)), '<f4', 'u1', 'u1', '<f4', '<f4'],
+                     'offsets': [0, 24, 28, 29, 32, 36], 'itemsize': 40})
 _U32 = struct.Struct('<I')
 
 
@@ -506,16 +521,17 @@ def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes
         num = len(j.state)
         w.pack(_SKELETON_HEAD, f.track_id, f.state, f.confidence, *f.first_seen,
                *f.last_observed, f.age, f.missed, *f.position, *f.velocity, f.velocity_valid,
-               *_COVARIANCE_UNKNOWN, num, align=8)
+               *f.covariance, num, align=8)
         joints = np.zeros(num, _JOINT3D)
         joints['position'] = j.xyz
         joints['confidence'] = j.confidence
         joints['state'] = j.state
         joints['num_views'] = j.num_views
         joints['reprojection_error'] = j.error
+        joints['position_variance'] = j.variance
         if num:                       # the joint count is the head's last field
             w.align(8)
-            w.buf += memoryview(joints).cast('B')[:-4]
+            w.buf += memoryview(joints).cast('B')
         w.strings(f.source_cameras)
     return w.getvalue()
 
@@ -530,6 +546,11 @@ def msg_to_tracks(msg: TrackedSkeletonArray) -> List[Track]:
         joints[states == JointState.MISSING] = np.nan
         err = np.array([j.reprojection_error for j in s.joints], dtype=np.float64)
         err[err < 0] = np.nan
+        var = np.array([j.position_variance for j in s.joints], dtype=np.float64)
+        var[var < 0] = np.nan
+        cov = np.array(s.position_covariance, dtype=np.float64).reshape(3, 3)
+        if cov[0, 0] < 0:
+            cov[:] = np.nan
         velocity = (np.array([s.velocity.x, s.velocity.y, s.velocity.z]) if s.velocity_valid
                     else np.full(3, np.nan))
         tracks.append(Track(
@@ -540,7 +561,10 @@ def msg_to_tracks(msg: TrackedSkeletonArray) -> List[Track]:
             position=np.array([s.position.x, s.position.y, s.position.z], dtype=np.float64),
             velocity=velocity, first_seen=stamp_to_sec(s.first_seen),
             last_observed=stamp_to_sec(s.last_observed), age=int(s.age), missed=int(s.missed),
-            score=float(s.confidence), source_cameras=tuple(s.source_cameras)))
+            score=float(s.confidence), source_cameras=tuple(s.source_cameras),
+            joint_variance=var, position_covariance=cov,
+            first_seen_ns=stamp_to_ns(s.first_seen),
+            last_observed_ns=stamp_to_ns(s.last_observed)))
     return tracks
 
 
