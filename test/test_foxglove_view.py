@@ -68,15 +68,7 @@ class Feeder:
 
     def __init__(self, feed: Pose2Sim):
         self.feed = feed
-        fusion = Fusion(feed.cameras, LAYOUT)
-        self.frames = []          # (stamp_ns, {cam: Person2DArray}, TrackedSkeletonArray)
-        for i, (_, _) in enumerate(feed.frames):
-            msgs = dict(feed.messages(i))
-            views = {c: person2d_array_to_numpy(m, 25).astype(np.float32).astype(np.float64)
-                     for c, m in msgs.items()}
-            tracks = fusion.step(views, feed.stamp_ns(i) / 1e9)
-            header = Header(stamp=msgs['cam_01'].header.stamp, frame_id='world')
-            self.frames.append((feed.stamp_ns(i), msgs, tracks_to_msg(tracks, header, LAYOUT)))
+        self.frames = self._frames_only(feed)
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
         self.node = rclpy.create_node('foxglove_feeder', context=self.ctx)
@@ -87,6 +79,20 @@ class Feeder:
         self.garbage = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
+
+    @staticmethod
+    def _frames_only(feed: Pose2Sim):
+        """Return [(stamp_ns, {cam: Person2DArray}, TrackedSkeletonArray)] of Fusion.step."""
+        fusion = Fusion(feed.cameras, LAYOUT)
+        frames = []
+        for i in range(len(feed.frames)):
+            msgs = dict(feed.messages(i))
+            views = {c: person2d_array_to_numpy(m, 25).astype(np.float32).astype(np.float64)
+                     for c, m in msgs.items()}
+            tracks = fusion.step(views, feed.stamp_ns(i) / 1e9)
+            header = Header(stamp=msgs['cam_01'].header.stamp, frame_id='world')
+            frames.append((feed.stamp_ns(i), msgs, tracks_to_msg(tracks, header, LAYOUT)))
+        return frames
 
     def matched(self) -> bool:
         return self.tracks_pub.get_subscription_count() > 0 and \
@@ -375,3 +381,31 @@ def test_bringup_starts_the_web_view_beside_fusion_node(tmp_path):
     assert set(latest_entities([m.decoded for m in got])) == \
         {f'camera/cam_0{i}' for i in range(1, 5)}
     assert code == 0, log_path.read_text()
+
+
+def test_scene_update_deletes_ended_tracks_and_fades_coasting_ones(shared_data):
+    """skeleton_update on real tracks: DELETED -> a deletion of its id, COASTING faded."""
+    from mv3dpose_ros.ros.messages import msg_to_tracks
+    from mv3dpose_ros.ros.scene import skeleton_update
+    feed = Pose2Sim(shared_data, frames=10)
+    *_, last = Feeder._frames_only(feed)[-1]
+    tracks = [t for t in msg_to_tracks(last) if t.state == TrackState.CONFIRMED]
+    assert len(tracks) == 2
+    tracks[0].state, tracks[1].state = TrackState.DELETED, TrackState.COASTING
+    update = skeleton_update(tracks, get_layout(LAYOUT).bones, 'world', 5_000_000_123, 0.5)
+    from google.protobuf import descriptor_pb2, descriptor_pool, json_format, message_factory
+    from foxglove.messages import SceneUpdate
+    schema = SceneUpdate.get_schema()
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+        pool.Add(fd)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+    d = json_format.MessageToDict(cls.FromString(update.encode()),
+                                  preserving_proto_field_name=True)
+    assert [x['id'] for x in d['deletions']] == [f'person/{tracks[0].track_id}']
+    [entity] = d['entities']
+    assert entity['id'] == f'person/{tracks[1].track_id}'
+    assert entity['lines'][0]['color']['a'] == pytest.approx(0.35)
+    assert entity['texts'][0]['text'] == f'#{tracks[1].track_id} coasting'
+    assert entity['lifetime'] == '0.500s'
+    assert entity['timestamp'] == '1970-01-01T00:00:05.000000123Z'

@@ -309,17 +309,24 @@ def test_node_publishes_static_camera_poses_and_track_frames(fake_tf2, node_run)
         stamps = {stamp_to_ns(t.header.stamp) for t in batch}
         assert len(stamps) == 1 and batch[0].header.frame_id == 'map'
         by_stamp[stamps.pop()] = {t.child_frame_id: t for t in batch}
-    checked = 0
+    checked = turned = 0
     for msg in run.tracks:
         confirmed = [t for t in msg_to_tracks(msg)
                      if t.state in (TrackState.CONFIRMED, TrackState.COASTING)]
         frames = by_stamp.get(stamp_to_ns(msg.header.stamp), {})
         assert sorted(frames) == sorted(f'body_{t.track_id}' for t in confirmed)
         for t in confirmed:
-            tr = frames[f'body_{t.track_id}'].transform.translation
-            np.testing.assert_allclose([tr.x, tr.y, tr.z], t.position, atol=1e-9)
+            tf = frames[f'body_{t.track_id}'].transform
+            np.testing.assert_allclose([tf.translation.x, tf.translation.y, tf.translation.z],
+                                       t.position, atol=1e-9)
+            yaw = body_yaw(t, get_layout('body25b'))      # from the published joints
+            if yaw is not None:
+                assert math.isclose(math.remainder(
+                    yaw_from_quaternion(tf.rotation) - yaw, 2 * math.pi), 0.0, abs_tol=1e-4)
+                turned += 1
             checked += 1
     assert checked >= 40, f'only {checked} track frames checked (2 people x 30 frames)'
+    assert turned >= 0.8 * checked, f'heading from the hips in only {turned} of {checked}'
 
 
 @pytest.mark.ros
