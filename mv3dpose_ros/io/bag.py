@@ -29,7 +29,8 @@ standard rosbag2 v9 directories that ``ros2 bag play``, RViz and Foxglove open o
   into one ``BagError`` that names the file.
 * Integrity: MCAP chunks carry their CRC32 and the footer the summary CRC (rosbags writes 0,
   "not checked"); sqlite3 bags get a table ``mv3dpose_crc32`` with one key per message
-  (CRC32 of the data, topic and timestamp), which ros2 bag ignores. Readers verify both, so a
+  (CRC32 of the data, and of topic id and timestamp) and per topic record, which ros2 bag
+  ignores. Readers verify both, so a
   corrupted payload is a ``BagError`` naming the file and the chunk (MCAP) or the message
   (sqlite3) instead of wrong values. Bags without CRCs (other writers) are read unchecked.
 * Crash safety: ``BagWriter.checkpoint`` closes the pending MCAP chunk and flushes it (sqlite3:
@@ -170,11 +171,23 @@ CRC_TABLE = 'mv3dpose_crc32'
 _U64 = struct.Struct('<Q')
 
 
+def _signed(key: int) -> int:
+    return key - (1 << 64) if key >= 1 << 63 else key
+
+
 def _message_key(topic_id: int, timestamp: int, data: bytes) -> int:
     """Return the signed 64-bit integrity key of one sqlite3 message row."""
-    mix = (int(timestamp) * 0x9E3779B1 + int(topic_id) * 0x85EBCA77) & 0xFFFFFFFF
-    key = (crc32(bytes(data)) << 32) | mix
-    return key - (1 << 64) if key >= 1 << 63 else key
+    where = crc32(struct.pack('<qq', int(timestamp), int(topic_id)))
+    return _signed((crc32(bytes(data)) << 32) | where)
+
+
+def _topic_key(*row) -> int:
+    """Return the integrity key of one ``topics`` row (id, name, type, format, QoS)."""
+    text = '\x00'.join(str(v) for v in row).encode('utf-8', 'surrogateescape')
+    return _signed((crc32(text) << 32) | crc32(b'mv3dpose topic row'))
+
+
+_TOPIC_ROWS = 'SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics'
 
 
 def _check_metadata(path: Path) -> None:
@@ -279,6 +292,8 @@ def _verify_sqlite(db: Path) -> Optional[int]:
             conn.create_function('mv3dpose_key', 3, _message_key, deterministic=True)
             (rows,) = conn.execute('SELECT COUNT(*) FROM messages').fetchone()
             (keys,) = conn.execute(f'SELECT COUNT(*) FROM {CRC_TABLE}').fetchone()
+            topic_rows = list(conn.execute(_TOPIC_ROWS))
+            known = set(k for (k,) in conn.execute(f'SELECT key FROM {CRC_TABLE}'))
             bad = conn.execute(
                 'SELECT m.id, t.name, m.timestamp FROM messages m LEFT JOIN topics t '
                 'ON t.id = m.topic_id WHERE mv3dpose_key(m.topic_id, m.timestamp, m.data) '
@@ -289,9 +304,13 @@ def _verify_sqlite(db: Path) -> Optional[int]:
     if bad is not None:
         raise BagError(f'{db}: message row {bad[0]} (topic {bad[1]}, {bad[2]} ns) fails its '
                        'CRC (data, topic or timestamp changed): the bag is corrupt')
-    if rows != keys:
-        raise BagError(f'{db}: {rows} message rows but {keys} CRC keys: rows were added or '
-                       'removed, the bag is corrupt')
+    for row in topic_rows:
+        if _topic_key(*row) not in known:
+            raise BagError(f'{db}: topic record {row[1]!r} fails its CRC (name, type or QoS '
+                           'changed): the bag is corrupt')
+    if rows + len(topic_rows) != keys:
+        raise BagError(f'{db}: {rows} message and {len(topic_rows)} topic rows but {keys} CRC '
+                       'keys: rows were added or removed, the bag is corrupt')
     return rows
 
 
@@ -359,11 +378,19 @@ class BagReader:
                                         (CRC_TABLE,)).fetchone():
                         return None
                     keys += [k for (k,) in conn.execute(f'SELECT key FROM {CRC_TABLE}')]
+                    topic_rows = list(conn.execute(_TOPIC_ROWS))
         except sqlite3.Error as exc:
             raise _bag_error(self.path, exc) from exc
         if not all(isinstance(k, int) for k in keys):
             raise BagError(f'{self.path}: table {CRC_TABLE} holds non-integer keys (corrupt)')
-        return np.sort(np.array(keys, dtype=np.int64))
+        keys = np.sort(np.array(keys, dtype=np.int64))
+        for row in topic_rows:
+            key = _topic_key(*row)
+            i = int(np.searchsorted(keys, key))
+            if i >= len(keys) or keys[i] != key:
+                raise BagError(f'{self.path}: topic record {row[1]!r} fails its CRC (name, type '
+                               'or QoS changed): the bag is corrupt')
+        return keys
 
     def _check_key(self, conn, stamp: int, data: bytes) -> None:
         key = _message_key(conn.id, stamp, data)
@@ -522,6 +549,8 @@ def _add_crc_table(db: Path) -> None:
         conn.execute(f'CREATE TABLE {CRC_TABLE} (key INTEGER NOT NULL)')
         conn.execute(f'INSERT INTO {CRC_TABLE} SELECT mv3dpose_key(topic_id, timestamp, data) '
                      'FROM messages')
+        conn.executemany(f'INSERT INTO {CRC_TABLE} VALUES (?)',
+                         [(_topic_key(*row),) for row in conn.execute(_TOPIC_ROWS)])
     conn.close()
 
 
