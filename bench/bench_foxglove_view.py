@@ -54,9 +54,9 @@ def _tracks(people: int, rng: np.random.Generator):
     for i in range(people):
         J = LAYOUT.num_joints
         joints = rng.normal([i * 0.8, 0.0, 1.0], [0.2, 0.2, 0.5], size=(J, 3))
+        states = np.full(J, JointState.TRIANGULATED, np.uint8)
         out.append(Track(track_id=i + 1, state=TrackState.CONFIRMED, joints=joints,
-                         confidence=np.ones(J), joint_state=np.full(J, JointState.TRIANGULATED,
-                                                                     np.uint8),
+                         confidence=np.ones(J), joint_state=states,
                          num_views=np.full(J, 4, np.uint8), reprojection_error=np.zeros(J),
                          position=joints[11:13].mean(0), velocity=np.zeros(3),
                          first_seen=0.0, last_observed=0.0))
