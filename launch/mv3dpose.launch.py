@@ -63,6 +63,12 @@ def _nodes(context, *args, **kwargs):
         parameters=[fusion_params, {'rig_config': rig, 'camera_ids': cameras,
                                     'input_topic': '/{camera}/persons_2d',
                                     'use_sim_time': sim_time}]))
+    port = int(LaunchConfiguration('foxglove_port').perform(context) or 0)
+    if port > 0:          # the live web view (README, "Live web view (Foxglove)")
+        nodes.append(Node(
+            package='mv3dpose_ros', executable='mv3dpose_foxglove_view', name='foxglove_view',
+            output='screen', parameters=[{'rig_config': rig, 'camera_ids': cameras,
+                                          'port': port, 'use_sim_time': sim_time}]))
     return nodes
 
 
@@ -81,5 +87,8 @@ def generate_launch_description():
                               description='fusion_node params file (default: the shipped one)'),
         DeclareLaunchArgument('use_sim_time', default_value='false',
                               description='use /clock (bag replay)'),
+        DeclareLaunchArgument('foxglove_port', default_value='0',
+                              description='also serve the live web view on this WebSocket '
+                                          'port (0: off)'),
         OpaqueFunction(function=_nodes),
     ])
