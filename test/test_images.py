@@ -152,3 +152,89 @@ def test_image_roundtrip_still_zero_copy(frame):
     parsed, data = parse_image_cdr(serialize_message(msg))
     arr, _ = image_to_numpy(parsed, data)
     assert np.array_equal(arr, frame) and not arr.flags['OWNDATA']
+
+
+def _run_publisher(args, topic, msg_type, count, ros_context, timeout=90.0):
+    """Start mv3dpose_image_publisher, collect ``count`` messages of ``topic``, stop it."""
+    import subprocess
+    import sys
+    import time
+
+    from conftest import interrupt, spin_until
+    from mv3dpose_ros.ros.qos import sensor_qos
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import CameraInfo
+
+    node = rclpy.create_node('image_probe', context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    got, infos = [], []
+    node.create_subscription(msg_type, topic, lambda m: got.append((time.time_ns(), m)),
+                             sensor_qos('best_effort', 50))
+    node.create_subscription(CameraInfo, topic.rsplit('/', 2)[0] + '/camera_info'
+                             if topic.endswith('/compressed') else
+                             topic.rsplit('/', 1)[0] + '/camera_info', infos.append,
+                             sensor_qos('best_effort', 50))
+    proc = subprocess.Popen([sys.executable, '-m', 'mv3dpose_ros.nodes.image_publisher',
+                             *args, '--wait-for-subscribers', '1'],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        spin_until(ex, lambda: len(got) >= count, timeout)
+    finally:
+        interrupt(proc, 20)
+        out = proc.stdout.read()
+        ex.shutdown()
+        node.destroy_node()
+    assert len(got) >= count, out
+    return got, infos, out
+
+
+@pytest.mark.ros
+def test_image_publisher_publishes_like_a_driver(shared_data, ros_context):
+    folder = os.path.join(shared_data, 'panoptic_demo', '00_03')
+    calib = os.path.join(shared_data, 'panoptic_demo', 'camera_parameters.json')
+    got, infos, out = _run_publisher([folder, '--camera', '00_03', '--rate', '10', '--loop',
+                                      '--calibration', calib], '/cam00_03/image_raw', Image, 12,
+                                     ros_context)
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in got]
+    assert all(s % 100_000_000 == 0 for s in stamps), stamps        # grid capture instants
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    assert all(arrival >= s for (arrival, _), s in zip(got, stamps))  # stamped at capture
+    assert got[0][1].header.frame_id == 'cam00_03_optical_frame'
+    # one loop later the same picture (published from the cached bytes, new stamp)
+    first = {s: bytes(m.data) for s, (_, m) in zip(stamps, got)}
+    for s in stamps:
+        if s + 500_000_000 in first:
+            assert first[s] == first[s + 500_000_000]
+    arr, order = image_to_numpy(got[0][1])
+    assert arr.shape == (1080, 1920, 3) and order == 'bgr'
+    info_stamps = {i.header.stamp.sec * 10**9 + i.header.stamp.nanosec for i in infos}
+    assert set(stamps[:5]) <= info_stamps and infos[0].width == 1920
+
+
+@pytest.mark.ros
+def test_image_publisher_compressed(shared_data, ros_context):
+    folder = os.path.join(shared_data, 'panoptic_demo', '00_06')
+    got, _, _ = _run_publisher([folder, '--camera', '00_06', '--rate', '10', '--loop',
+                                '--compressed', 'jpeg', '--encoding', 'mono8', '--trigger',
+                                'free'], '/cam00_06/image_raw/compressed', CompressedImage, 7,
+                               ros_context)
+    for _, msg in got:
+        arr, order = compressed_to_numpy(msg)
+        assert msg.format == 'mono8; jpeg compressed mono8'
+        assert order == 'gray' and arr.shape == (1080, 1920)
+
+
+def test_image_publisher_bad_input_exits_2(tmp_path):
+    import subprocess
+    import sys
+    res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.image_publisher',
+                          str(tmp_path / 'none'), '--camera', 'c'], capture_output=True,
+                         text=True, timeout=60)
+    assert res.returncode == 2 and 'source not found' in res.stderr
+    (tmp_path / 'empty').mkdir()
+    res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.image_publisher',
+                          str(tmp_path / 'empty'), '--trigger', 'free', '--rate', '-1'],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2 and 'rate_hz must be > 0' in res.stderr
