@@ -54,6 +54,7 @@ MODULE_KEYS = {
     'motmetrics': 'python3-motmetrics-pip',
     'mv3dpose_msgs': 'mv3dpose_msgs',
     'numpy': 'python3-numpy',
+    'onnx': 'python3-onnx-pip',          # int8 quantisation in pose2d/fetch.py
     'onnxruntime': 'python3-onnxruntime-pip',
     'rcl_interfaces': 'rcl_interfaces',
     'rclpy': 'rclpy',

@@ -233,7 +233,7 @@ class NodeRun:
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
         overrides = {'rig_config': self.feed.rig_path, 'layout': 'body25b',
-                     'world_frame': 'map', 'sync.idle_flush_s': 0.0}
+                     'world_frame': 'map', 'sync.max_wait_s': 2.0}   # loaded hosts
         overrides.update(params)
         try:
             self.node = FusionNode(context=self.ctx, parameter_overrides=[
