@@ -22,9 +22,11 @@ image topic of mv3dpose_bringup (camera names map to ROS names as in ``ros/names
 ``-r __ns:=/x`` remap wins). It runs free at ``--rate`` on the system clock and stamps each
 frame with its capture instant, like a driver: with ``--trigger grid`` (default) the instants
 are the multiples of the period, as for cameras triggered from one synchronised clock, so
-publishers of the same rate stamp the same instants whenever each process started; with
-``--trigger free`` each publisher has its own phase. With ``--start-stamp S`` frame ``k`` is
-stamped ``S + k / rate`` instead (reproducible stamps).
+publishers of the same rate stamp the same instants whenever each process started, and with
+``--loop`` an image folder shows frame ``(instant / period) mod N`` at each instant, so all
+cameras of a recorded rig show the same moment together; with ``--trigger free`` each
+publisher has its own phase and plays from the first frame. With ``--start-stamp S`` frame
+``k`` is stamped ``S + k / rate`` instead (reproducible stamps).
 
 ``--encoding`` publishes any encoding camera drivers use (bgr8, rgb8, mono8, bgra8, rgba8,
 mono16, yuv422, yuv422_yuy2); ``--compressed jpeg|png`` publishes ``sensor_msgs/CompressedImage``
@@ -152,10 +154,22 @@ class FrameSource:
         """Return the index of the next frame (seekable sources)."""
         return self._index
 
+    @property
+    def length(self) -> int:
+        """Return the number of frames of a seekable source."""
+        return len(self._cache) if self._cache is not None else len(self.files)
+
+    def frame_at(self, index: int) -> np.ndarray:
+        """Return frame ``index`` of a seekable source; the next frame is the one after it."""
+        self._index = index
+        frame = self.read_next()
+        if frame is None:
+            raise ValueError(f'{self.path}: no frame {index}')
+        return frame
+
     def skip(self) -> bool:
         """Step over the next frame without decoding it (seekable sources); False at the end."""
-        count = len(self._cache) if self._cache is not None else len(self.files)
-        if self._index >= count:
+        if self._index >= self.length:
             return False
         self._index += 1
         return True
@@ -229,16 +243,22 @@ class ImagePublisher(Node):
         """Return the stamp of frame ``k`` in nanoseconds."""
         return self.start_ns + k * self.period_ns
 
-    def _next_frame(self) -> Optional[Tuple[int, Optional[np.ndarray]]]:
+    def _next_frame(self, slot: Optional[int] = None
+                    ) -> Optional[Tuple[int, Optional[np.ndarray]]]:
         """
         Return ``(key, frame)`` of the next frame, or None at the end.
 
         ``key`` is the frame's index in a seekable source (-1 otherwise); ``frame`` is None
-        when its serialised message is cached (nothing to decode).
+        when its serialised message is cached (nothing to decode). ``slot`` (the capture
+        instant in periods of the clock, looping grid mode) picks frame ``slot % length``, so
+        every publisher of a rig shows the same moment at the same instant, whenever it started.
         """
         limit = int(self.params['max_frames'])
         if limit and self.count >= limit:
             return None
+        if slot is not None:
+            key = slot % self.source.length
+            return key, (None if key in self._wire else self.source.frame_at(key))
         for attempt in range(2):
             key = self.source.position if self.source.seekable else -1
             if key in self._wire:
@@ -284,7 +304,8 @@ class ImagePublisher(Node):
                 self.get_logger().warn(
                     f'publishing fell behind {self.params["rate_hz"]:g} Hz: {self.skipped} '
                     'frame instants skipped so far (CPU overloaded?)', throttle_duration_sec=10.0)
-            nxt = self._next_frame()
+            synced = grid and self.params['loop'] and self.source.seekable
+            nxt = self._next_frame(due // self.period_ns if synced else None)
             if nxt is None:
                 break
             self._publish(*nxt, due if grid else (now if self.stamp_now else
