@@ -19,7 +19,8 @@ End to end over DDS: bag player -> nodes (separate processes) -> recorder, on re
 * the full image pipeline on ../shared/data/panoptic_demo: image bag -> player ->
   pose2d_node x 5 -> fusion_node -> recorder, 3 people at every time point;
 * the Pose2Sim OpenPose detections replayed as a bag through fusion_node give the tracks of
-  ``mv3dpose track`` on the JSON files.
+  ``mv3dpose track`` on the JSON files: ``~/tracks`` those of ``--smooth causal`` and
+  ``~/tracks_smoothed`` those of ``--smooth fixed-lag --lag-frames 3``, frame for frame.
 """
 
 import json
@@ -31,7 +32,8 @@ import time
 
 import cv2
 from mv3dpose_ros.commands.bag import play
-from mv3dpose_ros.commands.convert import bag_to_jsonl, openpose_to_bag, persons_topic
+from mv3dpose_ros.commands.convert import (bag_to_jsonl, openpose_to_bag, persons_topic,
+                                           tracks_from_bag)
 from mv3dpose_ros.commands.demo import _recorder_cmd, _wait_for_nodes
 from mv3dpose_ros.commands.demo import _write_params, Pipeline, PLAUSIBLE_M, TRACKS_TOPIC
 from mv3dpose_ros.core.types import TrackState
@@ -40,6 +42,7 @@ import numpy as np
 import pytest
 
 CLI = [sys.executable, '-m', 'mv3dpose_ros.cli']
+SMOOTHED_TOPIC = '/fusion_node/tracks_smoothed'
 
 
 def _demo(args, tmp_path, timeout):
@@ -96,13 +99,15 @@ def test_pose2sim_bag_replay_gives_the_tracks_of_mv3dpose_track(
     root = os.path.join(shared_data, 'pose2sim_multiperson')
     calib = os.path.join(root, 'Calib_qualisys.toml')
     fps, start = 60.0, 1000.0
-    expected = tmp_path / 'track.jsonl'
-    proc = subprocess.run(CLI + ['track', '--calibration', calib, '--poses',
-                                 os.path.join(root, 'pose'), '--layout', 'body25b', '--fps',
-                                 str(fps), '--smooth', 'causal', '-o', str(expected),
-                                 '--no-progress'],
-                          capture_output=True, text=True, timeout=200)
-    assert proc.returncode == 0, proc.stderr
+    expected, expected_lag = tmp_path / 'track.jsonl', tmp_path / 'track_lag.jsonl'
+    for smooth, path in ((['causal'], expected), (['fixed-lag', '--lag-frames', '3'],
+                                                  expected_lag)):
+        proc = subprocess.run(CLI + ['track', '--calibration', calib, '--poses',
+                                     os.path.join(root, 'pose'), '--layout', 'body25b',
+                                     '--fps', str(fps), '--smooth', *smooth, '-o', str(path),
+                                     '--no-progress'],
+                              capture_output=True, text=True, timeout=200)
+        assert proc.returncode == 0, proc.stderr
 
     bag = tmp_path / 'detections'
     s = openpose_to_bag(os.path.join(root, 'pose'), calib, str(bag), 'body25b', fps=fps,
@@ -115,11 +120,11 @@ def test_pose2sim_bag_replay_gives_the_tracks_of_mv3dpose_track(
         # no shipped fusion.yaml: the node runs FusionConfig's defaults, as `track` does
         params = _write_params(tmp_path / 'fusion.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': calib, 'camera_ids': cams,
-            'layout': 'body25b', 'publish_tentative': True,
+            'layout': 'body25b', 'smoothed_lag_frames': 3,
             # 60 fps: the synchroniser's slop must stay below half a frame period
             'sync': {'slop_s': 0.004}}})
         pipeline.start('fusion_node', ['fusion_node', '--ros-args', '--params-file', params])
-        pipeline.start('recorder', _recorder_cmd(recorded, [TRACKS_TOPIC]))
+        pipeline.start('recorder', _recorder_cmd(recorded, [TRACKS_TOPIC, SMOOTHED_TOPIC]))
         _wait_for_nodes(ros_context, pipeline, [persons_topic(c) for c in cams], 60.0)
         n = play(str(bag), rate=0.0, context=ros_context, quiet=True, wait_for_subscribers=60,
                  pace_topics=[TRACKS_TOPIC], pace_timeout=5.0)
@@ -129,20 +134,31 @@ def test_pose2sim_bag_replay_gives_the_tracks_of_mv3dpose_track(
         assert pipeline.stop('recorder') == 0, pipeline.tail('recorder')
     finally:
         pipeline.stop_all()
-    live = tmp_path / 'live.jsonl'
-    bag_to_jsonl(str(recorded), str(live), fps=fps, start_time=start)
+    live, live_lag = tmp_path / 'live.jsonl', tmp_path / 'live_lag.jsonl'
+    bag_to_jsonl(str(recorded), str(live), TRACKS_TOPIC, fps=fps, start_time=start)
+    bag_to_jsonl(str(recorded), str(live_lag), SMOOTHED_TOPIC, fps=fps, start_time=start)
 
-    a = {f.frame: f for f in read_tracks(str(expected))}
-    b = {f.frame: f for f in read_tracks(str(live))}
-    assert sorted(b) == sorted(a) and len(a) == 100
     ids = set()
-    for frame in sorted(a):
-        ta, tb = a[frame].tracks, b[frame].tracks
-        assert [(t.id, t.state) for t in tb] == [(t.id, t.state) for t in ta], frame
-        for x, y in zip(ta, tb):
-            # float32 keypoints in the messages vs float64 from JSON: sub-millimetre
-            np.testing.assert_allclose(y.joints, x.joints, atol=2e-3, equal_nan=True)
-            if x.state == TrackState.CONFIRMED:
-                ids.add(x.id)
+    for want, got, lag in ((expected, live, 0), (expected_lag, live_lag, 3)):
+        a = {f.frame: f for f in read_tracks(str(want))}
+        b = {f.frame: f for f in read_tracks(str(got))}
+        # the node holds the last `lag` sets until more input (or a reset) comes
+        assert len(a) == 100 and sorted(b) == sorted(a)[:100 - lag]
+        for frame in sorted(b):
+            ta, tb = a[frame].tracks, b[frame].tracks
+            assert b[frame].stamp == pytest.approx(a[frame].stamp + start, abs=1e-6), frame
+            assert [(t.id, t.state) for t in tb] == [(t.id, t.state) for t in ta], frame
+            for x, y in zip(ta, tb):
+                # float32 keypoints in the messages vs float64 from JSON: sub-millimetre
+                np.testing.assert_allclose(y.joints, x.joints, atol=2e-3, equal_nan=True)
+                if x.state == TrackState.CONFIRMED:
+                    ids.add(x.id)
     assert len(ids) >= 2, 'the two people of the sequence were not tracked'
-    assert Path(live).stat().st_size > 0
+    # exact stamps end to end: a track observed by a set carries that set's header stamp
+    observed = 0
+    for stamp_ns, _, tracks in tracks_from_bag(str(recorded), TRACKS_TOPIC):
+        for t in tracks:
+            if t.state == TrackState.CONFIRMED:
+                assert t.last_observed_ns == stamp_ns
+                observed += 1
+    assert observed > 150
