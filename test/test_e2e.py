@@ -25,7 +25,6 @@ End to end over DDS: bag player -> nodes (separate processes) -> recorder, on re
 
 import json
 import os
-from pathlib import Path
 import subprocess
 import sys
 import time
