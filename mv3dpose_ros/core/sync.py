@@ -28,7 +28,8 @@ cameras whose inference finishes at different times lose no set:
   or until no missing camera can still contribute: by its observed frame period neither its
   next frame nor (when a later one already arrived) the frame before that falls in the
   window, e.g. a half-rate camera (a swapped pair of its own messages is still waited for),
-  or it has been silent for longer than ``max_wait`` plus its period. Then it is emitted as a
+  or it has been silent for longer than ``max_wait`` plus its period while its last stamp is
+  more than ``max_wait`` before the pivot. Then it is emitted as a
   partial set when at least ``min_views`` cameras contributed, otherwise its messages are
   dropped (``pivots_dropped``). ``poll(now)`` applies the wait when no message arrives.
 * The slop adapts to the cameras: each camera's frame period is the median of its recent
@@ -450,8 +451,10 @@ class StreamSynchronizer:
             if latest is not None and latest > hi and (
                     not period or latest - period > hi or latest - period + tol < pivot):
                 continue        # it sent a later frame, and the one before that is not ours
-            if now - last_arrival > self._max_wait + period:
-                continue                             # silent
+            if now - last_arrival > self._max_wait + period and (
+                    latest is None or latest < pivot - self._max_wait):
+                continue     # silent: nothing for a while, and its last frame is long past
+                #              (a node stalled by the CPU sees every camera late, not silent)
             if period and latest is not None and latest < pivot and \
                     latest + period - tol > hi:
                 continue                             # its next frame falls after the window

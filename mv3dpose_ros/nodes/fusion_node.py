@@ -574,8 +574,8 @@ class FusionNode(Node):
         """
         Age the tracks while no input set arrives: empty steps, as the tracker would get them.
 
-        Once no set came for half of ``fusion.max_coast_s`` (and longer than the synchroniser
-        could wait), every IDLE_STEP_S the tracks step with no views at the last set's stamp
+        Once no set came for ``fusion.max_coast_s`` (and longer than the synchroniser could
+        wait), every IDLE_STEP_S the tracks step with no views at the last set's stamp
         advanced by the node-clock time since (less that wait), so they go COASTING and are
         DELETED after ``fusion.max_coast_s`` as with empty sets; a message stamped before that
         time is then late. Under sim time a stalled /clock stops this too (and is reported in
@@ -588,11 +588,11 @@ class FusionNode(Node):
                 return
             idle_ns = self._now_ns() - self._last_set_node_ns
             # Frames captured up to (now - wait) would have arrived: the empty step stands for
-            # them. Stepping only starts after half of max_coast_s, so a hiccup of a publisher
-            # (or a replay slower than real time) does not turn its next frames late.
+            # them. Stepping only starts after max_coast_s, so a hiccup of a publisher (or a
+            # replay slower than real time) does not turn its next frames late.
             wait_ns = int(self.sync_config.max_wait_s * NS_PER_S) + \
                 (self.sync.frame_period_ns or int(IDLE_STEP_S * NS_PER_S))
-            if idle_ns <= max(wait_ns, int(self.fusion_config.max_coast_s * NS_PER_S / 2)):
+            if idle_ns <= max(wait_ns, int(self.fusion_config.max_coast_s * NS_PER_S)):
                 return
             stamp_ns = self._last_set_anchor_ns + idle_ns - wait_ns
             if stamp_ns <= self._last_set_ns:
