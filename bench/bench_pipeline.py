@@ -49,6 +49,7 @@ from typing import Dict, List
 
 import cv2
 import numpy as np
+import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo')
@@ -84,7 +85,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     """Start bringup, play the cameras, collect tracks and diagnostics; return the figures."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from mv3dpose_msgs.msg import TrackedSkeletonArray
+    from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
     from mv3dpose_ros.ros.images import numpy_to_image
     from mv3dpose_ros.ros.messages import stamp_to_ns
     from mv3dpose_ros.ros.names import camera_namespace
@@ -99,11 +100,23 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
                  for img in imgs] for c, imgs in frames.items()}
     tmp = tempfile.mkdtemp(prefix='bench_pipeline_')
     log = open(os.path.join(tmp, 'bringup.log'), 'w')
-    cmd = ['mv3dpose_bringup', '--rig', RIG, '--cameras', *cameras,
-           '--pose2d-param', f'model.providers:={provider}',
-           '--pose2d-param', 'image_qos.depth:=1']
-    for p in pose2d_params:
-        cmd += ['--pose2d-param', p]
+    params = [f'model.providers:={provider}', 'image_qos.depth:=1'] + list(pose2d_params)
+    if len(cameras) > 1:
+        cmd = ['mv3dpose_bringup', '--rig', RIG, '--cameras', *cameras]
+        for p in params:
+            cmd += ['--pose2d-param', p]
+    else:
+        # Fusion needs two cameras: one camera is pose2d_node alone, as bringup would start it.
+        from mv3dpose_ros.nodes.bringup import _nest, _parse_assignments, split_threads
+        values = {'model.threads': split_threads(1),
+                  **_parse_assignments(params, '--pose2d-param')}
+        over = os.path.join(tmp, 'pose2d.yaml')
+        with open(over, 'w') as f:
+            yaml.safe_dump({'/**/pose2d_node': {'ros__parameters': _nest(values)}}, f)
+        ns = camera_namespace(cameras[0])
+        cmd = ['pose2d_node', '--ros-args', '-r', f'__ns:=/{ns}', '-r',
+               f'image:=/{ns}/image_raw', '--params-file',
+               os.path.join(ROOT, 'config', 'pose2d.yaml'), '--params-file', over]
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT,
                             start_new_session=True)
     ctx = rclpy.Context()
@@ -112,24 +125,34 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     shown: Dict[int, int] = {}                  # stamp -> time point index
-    latency, observed, arrivals = [], [], []
+    latency, observed, arrivals, other = [], [], [], [0]
     diags: Dict[str, Dict[str, str]] = {}
 
     def on_tracks(msg) -> None:
         now = time.time_ns()
         stamp = stamp_to_ns(msg.header.stamp)
+        if stamp not in shown:                   # e.g. an idle step of fusion_node: no set
+            other[0] += 1
+            return
         latency.append((now - stamp) / 1e6)
         arrivals.append(now)
-        seen = sum(1 for s in msg.skeletons
-                   if s.state != s.DELETED and stamp_to_ns(s.last_observed) == stamp)
+        if hasattr(msg, 'skeletons'):
+            seen = sum(1 for s in msg.skeletons
+                       if s.state != s.DELETED and stamp_to_ns(s.last_observed) == stamp)
+        else:                                    # one camera: people in the 2D output
+            seen = sum(1 for p in msg.persons if p.score >= 0.5)
         observed.append((shown.get(stamp, -1), seen))
 
     def on_diag(msg) -> None:
         for s in msg.status:
             diags[s.name] = {kv.key: kv.value for kv in s.values}
 
-    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', on_tracks,
-                             reliable_qos(50))
+    if len(cameras) > 1:
+        node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', on_tracks,
+                                 reliable_qos(50))
+    else:
+        node.create_subscription(Person2DArray, f'/{camera_namespace(cameras[0])}/persons_2d',
+                                 on_tracks, reliable_qos(50))
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, reliable_qos(50))
     pubs = {c: node.create_publisher(Image, f'/{camera_namespace(c)}/image_raw',
                                      sensor_qos('best_effort', 1)) for c in cameras}
@@ -209,7 +232,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         for name in sorted(diags):
             print(f'    {name}: {diags[name]}')
     return {
-        'cameras': len(cameras), 'provider': provider, 'rate': rate,
+        'cameras': len(cameras), 'provider': provider, 'rate': rate, 'other': other[0],
         'published_rate': sets_published / window, 'tracks_rate': len(latency) / window,
         'p50': _percentile(latency, 50), 'p95': _percentile(latency, 95),
         'stage': stage, 'published_images': published * len(cameras), 'received': received,
@@ -228,17 +251,20 @@ def _print(r: dict) -> None:
                        if p >= 0)
     sets = sum(n for a, n, m in r['people'].values())
     full = sum(a for a, n, m in r['people'].values())
-    print(f'{r["cameras"]} cam x {r["rate"]:g} Hz, {r["provider"]}, input {",".join(r["input"])}:'
-          f' tracks {r["tracks_rate"]:.2f} Hz (published {r["published_rate"]:.2f} Hz), '
+    what = 'tracks' if r['cameras'] > 1 else 'persons_2d (no fusion with one camera)'
+    print(f'{r["cameras"]} cam x {r["rate"]:g} Hz, {r["provider"]}, input {",".join(r["input"])}'
+          f', threads {",".join(map(str, r["threads"]))}:'
+          f' {what} {r["tracks_rate"]:.2f} Hz (published {r["published_rate"]:.2f} Hz), '
           f'latency p50 {r["p50"]:.0f} ms p95 {r["p95"]:.0f} ms', flush=True)
     print('  stage medians (ms): ' + ', '.join(f'{k} {v:.1f}' for k, v in st.items()),
           flush=True)
     lost = r['published_images'] - r['received']
     print(f'  drops: before pose2d (DDS/QoS) {lost} of {r["published_images"]} images, '
-          f'pose2d newest-only {r["dropped_pose2d"]}, fusion sync {r["dropped_sync"]}',
+          f'pose2d newest-only {r["dropped_pose2d"]}, fusion sync {r["dropped_sync"]}; '
+          f'{r["other"]} outputs not stamped like a published set (idle steps) not counted',
           flush=True)
-    print(f'  people: sets with all 3 observed {full}/{sets}; per time point {people}',
-          flush=True)
+    print(f'  people: {"sets" if r["cameras"] > 1 else "images"} with all 3 observed '
+          f'{full}/{sets}; per time point {people}', flush=True)
 
 
 def main() -> int:

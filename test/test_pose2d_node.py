@@ -111,11 +111,12 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
     folder = _image_folder(tmp_path, 3)
     start = int(time.time()) - 1
     # image_publisher publishes image_raw, as drivers do; pose2d reads 'image' (remapped)
-    node = Pose2DNode(context=ros_context, namespace='/camx', cli_args=REMAP,
-                      parameter_overrides=[
+    params = [
         Parameter('model.path', value=model), Parameter('model.threads', value=1),
         Parameter('image_qos.reliability', value='reliable'),
-        Parameter('keypoint_threshold', value=0.5), Parameter('diagnostics_period_s', value=0.2)])
+        Parameter('keypoint_threshold', value=0.5), Parameter('diagnostics_period_s', value=0.2)]
+    node = Pose2DNode(context=ros_context, namespace='/camx', cli_args=REMAP,
+                      parameter_overrides=params)
     assert node.active, node.error
     assert node.camera_id == 'camx'
     probe = Probe(ros_context, '/camx')
@@ -151,11 +152,16 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
         probe.watch_info('/camx')
         assert spin_until(ex, lambda: probe.infos, timeout=10)
         assert probe.infos[0].layout == 'coco17' and len(probe.infos[0].joint_names) == 17
-        assert spin_until(ex, lambda: any(
-            s.name.startswith('camx/pose2d_node') or 'camx inference' in s.name
-            for d in probe.diags for s in d.status), timeout=10)
-        status = next(s for d in reversed(probe.diags) for s in d.status
-                      if 'camx inference' in s.name)
+
+        def latest():
+            return next((s for d in reversed(probe.diags) for s in d.status
+                         if 'camx inference' in s.name), None)
+
+        # the first status may predate the last image: wait for one that counts it
+        assert spin_until(ex, lambda: latest() is not None and int(
+            {kv.key: kv.value for kv in latest().values}['Images processed'])
+            == node.processed, timeout=10)
+        status = latest()
         keys = {kv.key: kv.value for kv in status.values}
         assert status.hardware_id == 'camx'
         assert int(keys['Images processed']) == node.processed
@@ -315,10 +321,11 @@ def test_real_model_on_panoptic_frames(ros_context, shared_data):
     from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
     demo = os.path.join(shared_data, 'panoptic_demo')
     # image_publisher publishes image_raw, as drivers do; pose2d reads 'image' (remapped)
-    node = Pose2DNode(context=ros_context, namespace='/p03', cli_args=REMAP,
-                      parameter_overrides=[
+    params = [
         Parameter('model.path', value=model), Parameter('model.threads', value=2),
-        Parameter('image_qos.reliability', value='reliable')])
+        Parameter('image_qos.reliability', value='reliable')]
+    node = Pose2DNode(context=ros_context, namespace='/p03', cli_args=REMAP,
+                      parameter_overrides=params)
     assert node.active, node.error
     probe = Probe(ros_context, '/p03')
     infos = []
@@ -380,3 +387,48 @@ def test_lifecycle_without_autostart(ros_context, tmp_path):
         assert not bad.active and 'model file not found' in bad.error
     finally:
         bad.destroy_node()
+
+
+def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
+    """inference_rate_hz: only the first image of each stamp window reaches the model."""
+    from mv3dpose_ros.nodes.pose2d_node import header_stamp_ns, Pose2DNode
+    from rclpy.serialization import serialize_message
+    nodes = [Pose2DNode(context=ros_context, namespace=f'/grid{i}', parameter_overrides=[
+        Parameter('autostart', value=False), Parameter('inference_rate_hz', value=5.0)])
+        for i in range(2)]
+    img = np.zeros((4, 4, 3), np.uint8)
+    try:
+        taken = [[], []]
+        for i, node in enumerate(nodes):
+            # camera 1 misses some frames and receives them with jitter: same instants anyway
+            steps = range(0, 20) if i == 0 else (1, 2, 5, 6, 7, 9, 12, 13, 17, 18, 19)
+            for k in steps:
+                stamp = 1000 * NS + k * 50_000_000             # 20 Hz camera
+                wire = serialize_message(numpy_to_image(
+                    img, Header(stamp=ns_to_stamp(stamp), frame_id='f'), 'bgr8'))
+                assert header_stamp_ns(wire) == stamp
+                before = node.skipped
+                node._on_image(wire)
+                if node.skipped == before:
+                    taken[i].append(stamp)
+        assert [t - 1000 * NS for t in taken[0]] == [k * 200_000_000 for k in range(5)]
+        assert nodes[0].skipped == 15 and nodes[0].received == 20
+        assert nodes[0].dropped == 4                # no worker: each replaced the previous
+        # camera 1 took the first image it had of each window: where it had the window's
+        # first frame (600 ms), both cameras infer the same instant
+        assert [t - 1000 * NS for t in taken[1]] == [ms * 1_000_000 for ms in
+                                                     (50, 250, 450, 600, 850)]
+        assert set(taken[0]) & set(taken[1]) == {1000 * NS + 600_000_000}
+        # a stamp jump back (a replay starting again) opens a new window at once
+        back = serialize_message(numpy_to_image(
+            img, Header(stamp=ns_to_stamp(990 * NS), frame_id='f'), 'bgr8'))
+        nodes[0]._on_image(back)
+        assert nodes[0]._pending is back
+        assert not nodes[0].set_parameters([Parameter('inference_rate_hz', value=-1.0)])[
+            0].successful
+        nodes[0].set_parameters([Parameter('inference_rate_hz', value=0.0)])
+        nodes[0]._on_image(back)
+        assert nodes[0].skipped == 15                # 0 = every image reaches the mailbox
+    finally:
+        for node in nodes:
+            node.destroy_node()

