@@ -167,11 +167,15 @@ def test_readme_rig_recipe_as_typed_gives_confirmed_tracks(shared_data, model, t
     probe = bench_rig.Probe(bench_rig.CAMERAS)
     start = time.time_ns()
     proc = _start(script, log, shell=True)
-    first = None
+    first = answering = None
     try:
-        deadline = time.monotonic() + 150.0
+        # Generous: five models start and share two cores with the publishers here; the
+        # figure that matters is printed (bench/bench_rig.py measures it too).
+        deadline = time.monotonic() + 240.0
         while time.monotonic() < deadline:
             assert proc.poll() is None, log_path.read_text()[-5000:]
+            if answering is None and probe.cameras_answering() == len(bench_rig.CAMERAS):
+                answering = (time.time_ns() - start) / NS
             first = probe.first_confirmed(1, start)
             if probe.first_confirmed(3, start) is not None:
                 break
@@ -183,8 +187,8 @@ def test_readme_rig_recipe_as_typed_gives_confirmed_tracks(shared_data, model, t
     counts = [(c, n) for _, _, c, n in probe.tracks]
     probe.close()
     text = log_path.read_text()
-    print(f'recipe: first confirmed track after {first} s, 3 confirmed people after {three} s; '
-          f'{len(counts)} tracks messages')
+    print(f'recipe: all cameras answering after {answering} s, first confirmed track after '
+          f'{first} s, 3 confirmed people after {three} s; {len(counts)} tracks messages')
     assert first is not None, text[-5000:]
     assert three is not None, (counts[-20:], text[-3000:])
     assert '[bringup] all nodes stopped cleanly' in text, text[-3000:]
