@@ -390,3 +390,19 @@ def test_min_views_one_expires_on_the_only_live_camera():
     out = feed(sync, [('cam0', T0 + f * PERIOD) for f in range(1, 8)])
     assert [s.stamp_ns for s in out][:3] == [T0 + PERIOD, T0 + 2 * PERIOD, T0 + 3 * PERIOD]
     assert all(s.missing == ('cam1', 'cam2') for s in out)
+
+
+def test_sustained_forward_jump_of_the_rig_continues_without_reset():
+    """Input queues that dropped 1 s under load: every camera skips ahead together."""
+    sync = make()
+    out = feed(sync, flat(frames(20)))
+    skip = 30                                   # frames lost upstream (~1 s)
+    arrival = 20 * PERIOD
+    for f in range(20 + skip, 30 + skip):
+        for c in CAMS:
+            arrival += MS
+            out += sync.add(c, T0 + f * PERIOD, (c, f), arrival).sets
+    assert sync.resets == 0 and sync.forward_jumps == 1
+    assert len(out) == 30 and all(s.complete for s in out)
+    assert sum(st.outliers for st in sync.stats.values()) == 0
+    assert all(sync.stats[c].lost == skip for c in CAMS)

@@ -42,9 +42,10 @@ cameras whose inference finishes at different times lose no set:
 * Stamps more than ``jump_s`` away from the stream's time (the newest accepted stamp,
   advanced by the arrival time since) are *outliers*: held aside, and dropped and counted
   when the camera's next message is normal again. Only a sustained jump (``jump_confirm``
-  consecutive outliers on each of at least two cameras, consistent with each other, e.g. a
-  bag loop or a driver restart) resets the synchroniser; the held messages then start the
-  new timeline and the caller is told so it can reset its tracker too.
+  consecutive outliers on each of at least two cameras, consistent with each other) is
+  taken, and the held messages then continue the stream: backwards (a bag loop or a driver
+  restart) the synchroniser is reset and the caller told so it can reset its tracker too;
+  forwards (a pause, or input queues that dropped under load) time simply goes on.
 * Losses upstream are counted from the stamps: a step longer than 1.5 of the camera's usual
   period counts the frames in between as ``lost``.
 * Memory is bounded: at most ``max_queue`` messages per camera (beyond it the oldest pivot is
@@ -234,6 +235,7 @@ class StreamSynchronizer:
         self.overflow_decisions = 0                  # pivots decided early: a queue was full
         self.decisions: Counter = Counter()          # why incomplete sets were decided
         self.resets = 0
+        self.forward_jumps = 0                       # sustained forward jumps taken, no reset
 
     # --- public API ------------------------------------------------------------------------
 
@@ -358,15 +360,28 @@ class StreamSynchronizer:
 
     def _restart(self, group: List[str], cam: str, stamp_ns: int, off: int,
                  now: int) -> AddResult:
-        """Reset on a sustained jump and replay the held messages (the group's first)."""
+        """
+        Take a sustained jump; replay the held messages (the group's first).
+
+        Backwards (bag loop, driver restart, clock step back) the synchroniser is reset and
+        the caller is told to reset its tracker. Forwards (the whole rig skipped ahead: a
+        pause, or an overloaded node whose input queues dropped their oldest messages) time
+        simply goes on: the stream time moves to the new stamps and nothing is reset.
+        """
         held = {c: list(self._suspects[c]) for c in self.camera_ids}
         for c in self.camera_ids:
             self._suspects[c].clear()
-        self.reset()
-        result = AddResult(reset=True, reason=(
-            f'stamps of cameras {", ".join(group)} jumped {off / NS_PER_S:+.3f} s for '
-            f'{self.config.jump_confirm}+ messages each (bag loop, driver restart or clock '
-            f'step); synchroniser reset'))
+        what = (f'stamps of cameras {", ".join(group)} jumped {off / NS_PER_S:+.3f} s for '
+                f'{self.config.jump_confirm}+ messages each')
+        if off < 0:
+            self.reset()
+            result = AddResult(reset=True, reason=f'{what} (bag loop, driver restart or clock '
+                               'step back); synchroniser reset')
+        else:
+            self._ref = None
+            self.forward_jumps += 1
+            result = AddResult(reason=f'{what} (pause or input dropped under load); '
+                               'continuing from the new stamps')
         order = sorted((e for c in group for e in ((c, x) for x in held[c])),
                        key=lambda ce: ce[1][1])
         order += sorted((e for c in self.camera_ids if c not in group

@@ -554,6 +554,8 @@ class FusionNode(Node):
             elif result.kind == 'outlier':   # held; counted by the synchroniser when dropped
                 self._rlog(f'{cam}:outlier', f'Person2DArray of camera {cam} on {state.topic}: '
                            f'{result.reason}')
+            elif result.reason and not result.reset:   # a forward jump of the rig, taken
+                self._rlog('forward_jump', result.reason)
             if result.accepted:
                 state.accepted += 1
             if self.sync.slop_note and not self._slop_note_logged:
@@ -783,6 +785,7 @@ class FusionNode(Node):
                       'slop (ms)': s.slop_ns / 1e6,
                       'frame period (ms)': (s.frame_period_ns or math.nan) / 1e6,
                       'resets': self.counts['resets'],
+                      'forward jumps (no reset)': s.forward_jumps,
                       'idle steps (no input)': self.counts['idle_steps'], **drops}
             changed = {k: v for k, v in new.items() if v > 0}
             level = WARN if changed else OK
