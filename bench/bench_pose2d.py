@@ -23,10 +23,19 @@ on the same pre-processed tensor. The two are interleaved image by image so both
 machine load; medians and the overhead (path - bare) / bare are printed. Target: <= 10 %.
 
     python bench/bench_pose2d.py [--model yolo11n-pose] [--size 640] [--threads 2] [--iters 30]
+
+``--compare`` instead measures each fetched variant of the model (sizes, fp32 / int8) on the
+25 real Panoptic views (5 cameras x 5 time points): onnxruntime time per image (median wall
+and CPU, interleaved so all variants see the same load) and the people found, i.e. the 3D
+people the fusion core triangulates from the 5 views at each time point (the scene has 3),
+plus the median keypoint shift against the first variant:
+
+    python bench/bench_pose2d.py --compare [--threads 1]
 """
 
 import argparse
 import os
+import resource
 import statistics
 import sys
 import time
@@ -44,7 +53,11 @@ def main() -> int:
     parser.add_argument('--size', default=None, help='N or HxW (default: the model default)')
     parser.add_argument('--threads', type=int, default=2)
     parser.add_argument('--iters', type=int, default=30)
+    parser.add_argument('--compare', action='store_true',
+                        help='speed and people found of every fetched variant (see above)')
     args = parser.parse_args()
+    if args.compare:
+        return compare(args.model, args.threads)
 
     from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
     try:
@@ -118,6 +131,76 @@ def main() -> int:
     print(f'  overhead path - bare   median {added:7.2f} ms (what the node adds per image)')
     print(f'  overhead (path - bare) / bare: {100 * (med_path - med_bare) / med_bare:.1f} % of '
           f'medians, {100 * paired:.1f} % median paired (target <= 10 %)')
+    return 0
+
+
+def _cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _shift_px(ref, det) -> float:
+    """Return the median distance of confident keypoints of nearest-centre matched people."""
+    import numpy as np
+    out = []
+    for a in ref:
+        if len(det) == 0:
+            break
+        ca = a[a[:, 2] > 0.5, :2].mean(0) if (a[:, 2] > 0.5).any() else a[:, :2].mean(0)
+        b = min(det, key=lambda d: np.linalg.norm(d[:, :2].mean(0) - ca))
+        both = (a[:, 2] > 0.5) & (b[:, 2] > 0.5)
+        out += list(np.linalg.norm(a[both, :2] - b[both, :2], axis=1))
+    return out
+
+
+def compare(model: str, threads: int) -> int:
+    """Print speed and people found of each fetched variant of ``model``."""
+    import numpy as np
+    from mv3dpose_ros.core.calibration import load_calibration
+    from mv3dpose_ros.core.fusion import Fusion
+    from mv3dpose_ros.pose2d.estimator import open_estimator
+    from mv3dpose_ros.pose2d.models import get_spec, model_file, PRECISIONS, size_tag
+    demo = os.path.dirname(DATA)
+    cams = ('00_03', '00_06', '00_12', '00_13', '00_23')
+    frames = ('00004500', '00005514', '00006859', '00009348', '00013007')
+    spec = get_spec(model)
+    variants = [(s, p) for p in PRECISIONS for s in spec.sizes
+                if os.path.isfile(model_file(model, s, None, p))]
+    if not variants or not os.path.isdir(demo):
+        print(f'bench_pose2d --compare: skipped: no fetched {model} or no {demo}')
+        return 0
+    calib = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cams)
+    images = {(c, f): cv2.imread(os.path.join(demo, c, f'{c}_{f}.jpg')) for c in cams
+              for f in frames}
+    ests = [open_estimator(model_file(model, s, None, p), threads=threads)
+            for s, p in variants]
+    wall = [[] for _ in ests]
+    cpu = [[] for _ in ests]
+    dets = [{} for _ in ests]
+    for rep in range(2):
+        for key, image in images.items():
+            for i, est in enumerate(ests):
+                tensor, _ = est.preprocess(image)
+                c0, w0 = _cpu_s(), time.perf_counter()
+                est.run(tensor)
+                w1, c1 = time.perf_counter(), _cpu_s()
+                wall[i].append((w1 - w0) * 1e3)
+                cpu[i].append((c1 - c0) * 1e3)
+                if rep == 0:
+                    dets[i][key] = est.infer(image).keypoints
+    print(f'bench_pose2d --compare: {model} on {len(images)} real 1920x1080 Panoptic views, '
+          f'{threads} intra-op thread(s), load {os.getloadavg()}')
+    for i, (size, precision) in enumerate(variants):
+        people = []
+        for f in frames:
+            fusion = Fusion(calib, 'coco17')
+            fusion.step({c: dets[i][c, f] for c in cams}, 0.0)
+            people.append(int(fusion.last_poses.shape[0]))
+        shift = [d for key in images for d in _shift_px(dets[0][key], dets[i][key])]
+        print(f'  {size_tag(size):>8} {precision}: run median {statistics.median(wall[i]):6.1f} '
+              f'ms wall, {statistics.median(cpu[i]):6.1f} ms CPU; 3D people per time point '
+              f'{people} (scene: 3); keypoint shift vs {size_tag(variants[0][0])} '
+              f'{variants[0][1]}: median {np.median(shift) if shift else float("nan"):.1f} px')
     return 0
 
 
