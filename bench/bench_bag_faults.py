@@ -71,8 +71,9 @@ def kill(args) -> None:
     work = Path(tempfile.mkdtemp(prefix='bag_kill_'))
     out = work / 'rec'
     mv3dpose = [sys.executable, '-m', 'mv3dpose_ros.cli']
+    log = open(work / 'published.txt', 'w')     # a file: a full pipe would block the publisher
     pub = subprocess.Popen([sys.executable, '-c', PUBLISHER, str(args.topics), str(args.rate)],
-                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
+                           stdout=log, stderr=subprocess.DEVNULL, text=True, env=env)
     rec = subprocess.Popen(mv3dpose + ['bag', 'record', '-o', str(out), '-q', '--checkpoint',
                                        str(args.checkpoint)]
                            + [f'/cam{i}/persons' for i in range(args.topics)],
@@ -91,7 +92,9 @@ def kill(args) -> None:
         killed_at = time.monotonic()
     finally:
         pub.send_signal(signal.SIGINT)
-        pout, _ = pub.communicate(timeout=30)
+        pub.wait(timeout=30)
+        log.close()
+        pout = (work / 'published.txt').read_text()
         if rec.poll() is None:
             rec.kill()
     published = [(float(t), int(n)) for t, n in

@@ -295,8 +295,9 @@ def test_sigkilled_recorder_loses_at_most_its_last_checkpoint(tmp_path):
     """
     import signal
     env = dict(os.environ)
-    pub = subprocess.Popen([sys.executable, '-c', _PUBLISHER], stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True, env=env)
+    log = open(tmp_path / 'published.txt', 'w')    # a file: a full pipe would block it
+    pub = subprocess.Popen([sys.executable, '-c', _PUBLISHER], stdout=log,
+                           stderr=subprocess.DEVNULL, text=True, env=env)
     out = tmp_path / 'rec'
     rec = subprocess.Popen(MV3DPOSE + ['bag', 'record', '/seq', '-o', str(out), '-q',
                                        '--checkpoint', '0.2'],
@@ -316,7 +317,9 @@ def test_sigkilled_recorder_loses_at_most_its_last_checkpoint(tmp_path):
         killed_at = time.monotonic()
     finally:
         pub.send_signal(signal.SIGINT)
-        pout, _ = pub.communicate(timeout=20)
+        pub.wait(timeout=20)
+        log.close()
+        pout = (tmp_path / 'published.txt').read_text()
         if rec.poll() is None:
             rec.kill()
     published = [(float(t), int(n)) for t, n in (line.split() for line in pout.split('\n')

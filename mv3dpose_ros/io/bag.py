@@ -861,6 +861,6 @@ def salvage(source: PathLike, output: PathLike, overwrite: bool = False) -> Salv
         for tid, stamp, data in sorted(messages, key=lambda m: m[1]):
             writer.write(topics[tid][0], stamp, data)
             counts[topics[tid][0]] += 1
-    note = (f'{lost} bytes after the last intact chunk were lost' if lost
-            else 'nothing was lost after the last checkpoint')
+    note = (f'{lost} bytes of an incomplete chunk after the last checkpoint were dropped' if lost
+            else 'the file ended at a checkpoint; messages not yet checkpointed were lost')
     return SalvageReport(Path(output), len(messages), counts, lost, note)
