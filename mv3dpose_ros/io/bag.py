@@ -293,7 +293,7 @@ def _verify_sqlite(db: Path) -> Optional[int]:
             (rows,) = conn.execute('SELECT COUNT(*) FROM messages').fetchone()
             (keys,) = conn.execute(f'SELECT COUNT(*) FROM {CRC_TABLE}').fetchone()
             topic_rows = list(conn.execute(_TOPIC_ROWS))
-            known = set(k for (k,) in conn.execute(f'SELECT key FROM {CRC_TABLE}'))
+            known = {k for (k,) in conn.execute(f'SELECT key FROM {CRC_TABLE}')}
             bad = conn.execute(
                 'SELECT m.id, t.name, m.timestamp FROM messages m LEFT JOIN topics t '
                 'ON t.id = m.topic_id WHERE mv3dpose_key(m.topic_id, m.timestamp, m.data) '
