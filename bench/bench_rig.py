@@ -247,6 +247,8 @@ def main() -> int:
     parser.add_argument('--people', type=int, default=3)
     parser.add_argument('--fusion-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='passed to mv3dpose_bringup (e.g. sync.max_wait_s:=0.5)')
+    parser.add_argument('--pose2d-param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='passed to mv3dpose_bringup (e.g. inference_rate_hz:=2)')
     parser.add_argument('--logs', default='', help='folder for the process logs')
     args = parser.parse_args()
     if not os.path.isdir(DEMO):
@@ -276,6 +278,7 @@ def main() -> int:
 
     try:
         over = [a for p in args.fusion_param for a in ('--fusion-param', p)]
+        over += [a for p in args.pose2d_param for a in ('--pose2d-param', p)]
         procs.append(launch(['mv3dpose_bringup', '--rig', CALIBRATION, '--cameras', *cams,
                              *over], 'bringup'))
         for cam in cams:
@@ -300,7 +303,8 @@ def main() -> int:
     published = published_counts(logs)
     probe.close()
     print(f'{len(cams)} cameras x 1920x1080 {args.compressed or "bgr8"} at {args.rate:g} Hz, '
-          f'{args.duration:g} s measured after {args.warmup:g} s warm-up; '
+          f'{args.duration:g} s measured after {args.warmup:g} s warm-up; bringup '
+          f'{" ".join(args.fusion_param + args.pose2d_param) or "defaults"}; '
           f'{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; logs in {logdir}')
     print(f'time points with persons_2d: {res["time_points_seen"]}, processable (>= 2 '
           f'cameras): {res["processable"]}, sets emitted: {res["emitted"]} '
