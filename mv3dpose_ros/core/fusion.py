@@ -99,7 +99,7 @@ class FusionConfig:
     confirm_at_birth_ratio: float = 0.6     # a new track with this share of the layout's joints
     #                                         triangulated from >= min(3, cameras) views is
     #                                         CONFIRMED at once (> 1: never)
-    publish_coast_s: float = 0.1            # COASTING tracks are published this long, then
+    publish_coast_s: float = 0.15           # COASTING tracks are published this long, then
     #                                         withheld until recovered or deleted
     min_birth_joints: int = 6               # triangulated joints to start a new track
     min_birth_cameras_in_view: int = 3      # cameras whose image must contain a new track's
