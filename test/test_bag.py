@@ -610,7 +610,13 @@ def test_ctrl_c_stops_record_and_loop_play_cleanly(tmp_path):
             MV3DPOSE + ['bag', 'play', str(tmp_path / 'bag'), '--loop', '--topics', '/chatter',
                         '--wait-for-subscribers', '20', '-q'],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(2.5)   # several loops of the 0.18 s bag
+        # both processes run once the recorder's first checkpoint holds messages (a fixed
+        # sleep sent SIGINT during their imports on a loaded machine)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any(
+                p.stat().st_size > 1000 for p in tmp_path.glob('.rec.partial-*/rec/*.mcap')):
+            time.sleep(0.1)
+        time.sleep(1.0)   # several loops of the 0.18 s bag
         assert player.poll() is None, 'a looping player must keep playing'
         player.send_signal(signal.SIGINT)
         _, perr = player.communicate(timeout=20)
