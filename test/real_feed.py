@@ -17,8 +17,8 @@ Real detections for ROS tests: the Pose2Sim session (4 cameras, 2 people, OpenPo
 
 Read in place from ``../shared/data/pose2sim_multiperson`` (never copied); the rig is the
 project's conversion ``config/rigs/pose2sim_multiperson.yaml`` of its calibration. Stamps are
-``t0 + frame / 60 s`` with ``t0`` in the recent past of the wall clock, or ``live_stamp()``
-(the wall clock minus a capture-to-publish delay, increasing) for a feed paced by its outputs.
+``t0 + frame / 60 s`` with ``t0`` in the recent past of the wall clock, as a live rig's are
+(data time advances by the frame period however slowly a loaded host delivers the frames).
 """
 
 import os
@@ -51,12 +51,6 @@ class Pose2Sim:
         seq = OpenPoseSequence(folders, num_joints=25)
         self.frames: List[Tuple[int, Dict[str, np.ndarray]]] = list(seq)[:frames]
         self.t0_ns = time.time_ns() - int((len(self.frames) / FPS + 1.0) * NS)
-
-    def live_stamp(self) -> int:
-        """Return a stamp as a live camera's: now minus 30 ms, and after the previous one."""
-        self._last_live = max(time.time_ns() - 30_000_000, getattr(self, '_last_live', 0) +
-                              int(NS / FPS))
-        return self._last_live
 
     def stamp_ns(self, index: int) -> int:
         """Return the stamp of the ``index``-th frame."""

@@ -81,7 +81,7 @@ def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path)
     def play(frames):
         for i in frames:
             n = len(tracks)
-            for cam, msg in feed.messages(i, feed.live_stamp()):
+            for cam, msg in feed.messages(i):
                 pubs[cam].publish(msg)
             assert spin_until(lambda: len(tracks) > n and len(poses) > n, 10.0), \
                 f'no output for frame {i}: ' + log_path.read_text()[-3000:]

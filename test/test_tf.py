@@ -264,7 +264,7 @@ class NodeRun:
 
     def play(self):
         for i in range(len(self.feed.frames)):
-            for cam, msg in self.feed.messages(i, self.feed.live_stamp()):
+            for cam, msg in self.feed.messages(i):
                 self.pubs[cam].publish(msg)
             assert self.spin_until(lambda: len(self.tracks) > i), f'no output for frame {i}'
 
