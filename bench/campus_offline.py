@@ -18,8 +18,11 @@ Campus through the offline tools, as a held-out OpenPose benchmark would run the
 The Campus ground truth (3 cameras, 360x288) goes through the simulated detector (pixel noise,
 missed joints and people, false positives, left/right swaps, outliers; ``--noise`` scales
 them), is written as OpenPose JSON folders named ``Camera0..2``, tracked with
-``mv3dpose track`` (each ``--smooth`` mode) and scored with ``mv3dpose eval``. Prints PCP,
-MPJPE, MOTA and id switches per noise level and mode: figures, not assertions.
+``mv3dpose track`` in the three output modes (live = ``--smooth causal``, what fusion_node
+publishes on ``~/tracks``; ``--smooth fixed-lag --lag-frames 3``, its ``~/tracks_smoothed``;
+``--smooth offline``) and scored with ``mv3dpose eval``. Prints PCP, MOTA, MPJPE and id
+switches side by side per noise level, averaged over several detector seeds: figures, not
+assertions. ``python bench/campus_offline.py [--noise 1,2] [--seeds 1,2,3] [--per-seed]``
 """
 
 import argparse
@@ -62,41 +65,63 @@ def write_openpose(folder: str, scale: float, seed: int, frames: np.ndarray) -> 
                 json.dump({'version': 1.3, 'people': people}, fh)
 
 
-def score(folder: str, smooth: str) -> dict:
-    """Run ``mv3dpose track`` and ``mv3dpose eval``; return the eval figures."""
-    tracks = os.path.join(folder, f'tracks_{smooth}.jsonl')
-    figures = os.path.join(folder, f'eval_{smooth}.json')
+MODES = (('live', ['causal']), ('fixed-lag', ['fixed-lag', '--lag-frames', '3']),
+         ('offline', ['offline']))
+
+
+def score(folder: str, smooth: list, name: str) -> dict:
+    """Run ``mv3dpose track --smooth ...`` and ``mv3dpose eval``; return the eval figures."""
+    tracks = os.path.join(folder, f'tracks_{name}.jsonl')
+    figures = os.path.join(folder, f'eval_{name}.json')
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         assert cli.main(['track', '--calibration', CALIB, '--poses', folder, '--layout',
-                         'shelf14', '--fps', '25', '--smooth', smooth, '-o', tracks,
+                         'shelf14', '--fps', '25', '--smooth', *smooth, '-o', tracks,
                          '--no-progress']) == 0
         assert cli.main(['eval', '--tracks', tracks, '--gt', DATA, '--format', 'campus',
                          '--json', figures]) == 0
     with open(figures, encoding='utf-8') as fh:
-        return json.load(fh)
+        r = json.load(fh)
+    return {'pcp': 100 * r['pcp']['average'], 'mota': 100 * r['mot']['mota'],
+            'mpjpe': 1000 * r['mpjpe_m'], 'idsw': r['mot']['id_switches']}
 
 
 def main() -> int:
-    """Print the table."""
+    """Print the table: per noise level, each mode averaged over the detector seeds."""
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--noise', default='1,2', help='detector noise scales (default 1,2)')
-    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--seeds', default='1,2,3', help='detector seeds (default 1,2,3)')
+    parser.add_argument('--per-seed', action='store_true', help='also print every seed')
     args = parser.parse_args()
     if not os.path.isdir(DATA):
         print(f'no Campus data at {DATA}', file=sys.stderr)
         return 1
+    seeds = [int(x) for x in args.seeds.split(',')]
     frames = np.arange(300, 800)
-    print('Campus frames 300-799 through the simulated detector, scored on the test frames')
-    print(f'{"noise":>5} {"smooth":>8} {"PCP %":>6} {"MPJPE mm":>9} {"MOTA %":>7} {"IDsw":>5}')
+    print('Campus frames 300-799 through the simulated detector, scored on the test frames; '
+          f'mean over detector seeds {seeds}')
+    print('live = --smooth causal (= fusion_node ~/tracks), fixed-lag = --smooth fixed-lag '
+          '--lag-frames 3 (= ~/tracks_smoothed), offline = --smooth offline')
+    head = ' '.join(f'{name:>21}' for name, _ in MODES)
+    print(f'{"noise":>5} {"":>6} {head}')
+    print(f'{"":>5} {"":>6} ' + ' '.join(f'{"PCP  MOTA MPJPE IDsw":>21}' for _ in MODES))
     for scale in (float(x) for x in args.noise.split(',')):
-        with tempfile.TemporaryDirectory() as folder:
-            write_openpose(folder, scale, args.seed, frames)
-            for smooth in ('offline', 'causal', 'none'):
-                r = score(folder, smooth)
-                print(f'{scale:5g} {smooth:>8} {100 * r["pcp"]["average"]:6.1f} '
-                      f'{1000 * r["mpjpe_m"]:9.1f} {100 * r["mot"]["mota"]:7.1f} '
-                      f'{r["mot"]["id_switches"]:5d}')
+        rows = {name: [] for name, _ in MODES}
+        for seed in seeds:
+            with tempfile.TemporaryDirectory() as folder:
+                write_openpose(folder, scale, seed, frames)
+                for name, smooth in MODES:
+                    rows[name].append(score(folder, smooth, name))
+            if args.per_seed:
+                print(f'{scale:5g} {"s" + str(seed):>6} ' + ' '.join(
+                    _cell(rows[name][-1]) for name, _ in MODES))
+        mean = {name: {k: float(np.mean([r[k] for r in v])) for k in v[0]}
+                for name, v in rows.items()}
+        print(f'{scale:5g} {"mean":>6} ' + ' '.join(_cell(mean[name]) for name, _ in MODES))
     return 0
+
+
+def _cell(r: dict) -> str:
+    return f'{r["pcp"]:5.1f} {r["mota"]:5.1f} {r["mpjpe"]:5.1f} {r["idsw"]:4.1f}'
 
 
 if __name__ == '__main__':
