@@ -147,6 +147,7 @@ class CameraSyncStats:
     missing: int = 0                 # emitted sets without this camera
     lost: int = 0                    # frames missing from the stamp sequence (upstream loss)
     latest_stamp_ns: Optional[int] = None
+    last_seen_ns: Optional[int] = None       # newest stamp seen (accepted or not): rate, gaps
     last_arrival_ns: Optional[int] = None
     period_ns: Optional[int] = None          # median of the recent stamp steps
     usual_period_ns: Optional[int] = None    # shortest sustained period seen (usual rate)
@@ -182,9 +183,10 @@ class CameraSyncStats:
 
     def observe_step(self, stamp_ns: int) -> None:
         """Update period, usual period and upstream losses with a stamp newer than the last."""
-        if self.latest_stamp_ns is None or stamp_ns <= self.latest_stamp_ns:
+        last, self.last_seen_ns = self.last_seen_ns, max(stamp_ns, self.last_seen_ns or 0)
+        if last is None or stamp_ns <= last:
             return
-        step = stamp_ns - self.latest_stamp_ns
+        step = stamp_ns - last
         if self.usual_period_ns and step > 1.5 * self.usual_period_ns:
             self.lost += int(round(step / self.usual_period_ns)) - 1
         self.steps_ns.append(step)
@@ -280,6 +282,10 @@ class StreamSynchronizer:
             f'{self.config.jump_s:g} s); held aside and dropped unless it starts a sustained '
             f'jump on at least {self._jump_cameras()} cameras (check the camera clocks)'))
 
+    def observe(self, camera_id: str, stamp_ns: int) -> None:
+        """Count a stamp the caller dropped before ``add`` (rate and gap statistics only)."""
+        self.stats[camera_id].observe_step(int(stamp_ns))
+
     def poll(self, now_ns: Optional[int] = None) -> List[SyncedSet]:
         """Decide the sets whose wait has run out at ``now_ns`` (call it on a timer)."""
         return self._process(int(self._clock() if now_ns is None else now_ns))
@@ -300,7 +306,7 @@ class StreamSynchronizer:
             st.dropped += len(self._buffers[cam])
             self._buffers[cam].clear()
             self._drop_suspects(cam)
-            st.latest_stamp_ns = None
+            st.latest_stamp_ns = st.last_seen_ns = None
         self.last_emitted_ns = None
         self._consumed_ns = None
         self._ref = None

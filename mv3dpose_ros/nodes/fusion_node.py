@@ -544,6 +544,10 @@ class FusionNode(Node):
                 return
             poses, problem = self._validate(state, msg, stamp_ns, now)
             if problem is not None:
+                seen = self.sync.stats[cam].last_seen_ns
+                if stamp_ns > 0 and (problem[0] != 'future_stamp' or seen is None or
+                                     stamp_ns - seen <= self.sync_config.jump_s * NS_PER_S):
+                    self.sync.observe(cam, stamp_ns)   # dropped here, not lost upstream
                 self._reject(state, *problem, now)
                 return
             result = self.sync.add(cam, stamp_ns, poses, arrival)
@@ -577,7 +581,7 @@ class FusionNode(Node):
         Age the tracks while no input set arrives: empty steps, as the tracker would get them.
 
         Once no set came for ``fusion.max_coast_s`` (and longer than the synchroniser could
-        wait), every IDLE_STEP_S the tracks step with no views at the last set's stamp
+        wait) and no input at all arrived for as long, every IDLE_STEP_S the tracks step with no views at the last set's stamp
         advanced by the node-clock time since (less that wait), so they go COASTING and are
         DELETED after ``fusion.max_coast_s`` as with empty sets; a message stamped before that
         time is then late. Under sim time a stalled /clock stops this too (and is reported in
@@ -594,8 +598,11 @@ class FusionNode(Node):
             # replay slower than real time) does not turn its next frames late.
             wait_ns = int(self.sync_config.max_wait_s * NS_PER_S) + \
                 (self.sync.frame_period_ns or int(IDLE_STEP_S * NS_PER_S))
-            if idle_ns <= max(wait_ns, int(self.fusion_config.max_coast_s * NS_PER_S)):
+            coast_ns = int(self.fusion_config.max_coast_s * NS_PER_S)
+            if idle_ns <= max(wait_ns, coast_ns):
                 return
+            if self._last_rx_any_ns is not None and steady_ns() - self._last_rx_any_ns <= coast_ns:
+                return     # inputs still arrive (dropped, e.g. under a stalled /clock): no gap
             stamp_ns = self._last_set_anchor_ns + idle_ns - wait_ns
             if stamp_ns <= self._last_set_ns:
                 return
