@@ -81,7 +81,8 @@ def _load_frames(cameras: List[str]) -> Dict[str, List[np.ndarray]]:
 
 
 def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider: str,
-        pose2d_params: List[str], warmup_s: float, verbose: bool) -> dict:
+        pose2d_params: List[str], warmup_s: float, verbose: bool,
+        fusion_params: List[str] = ()) -> dict:
     """Start bringup, play the cameras, collect tracks and diagnostics; return the figures."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -105,6 +106,8 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         cmd = ['mv3dpose_bringup', '--rig', RIG, '--cameras', *cameras]
         for p in params:
             cmd += ['--pose2d-param', p]
+        for p in fusion_params:
+            cmd += ['--fusion-param', p]
     else:
         # Fusion needs two cameras: one camera is pose2d_node alone, as bringup would start it.
         from mv3dpose_ros.nodes.bringup import _nest, _parse_assignments, split_threads
@@ -279,6 +282,7 @@ def main() -> int:
     parser.add_argument('--providers', nargs='+', default=None,
                         help='execution providers to compare (default: every available one)')
     parser.add_argument('--pose2d-param', action='append', default=[], metavar='NAME:=VALUE')
+    parser.add_argument('--fusion-param', action='append', default=[], metavar='NAME:=VALUE')
     parser.add_argument('--verbose', action='store_true', help='print every diagnostic status')
     args = parser.parse_args()
     if not os.path.isdir(DATA):
@@ -288,7 +292,8 @@ def main() -> int:
     short = {v: k for k, v in PROVIDERS.items()}
     providers = args.providers or [short[p] for p in resolve_providers('auto')[0]]
     print(f'bench_pipeline: load {os.getloadavg()}, {os.cpu_count()} cores, pose2d params '
-          f'{args.pose2d_param or "(shipped defaults)"}', flush=True)
+          f'{args.pose2d_param or "(shipped defaults)"}, fusion params '
+          f'{args.fusion_param or "(shipped defaults)"}', flush=True)
     for provider in providers:
         for n in args.cameras:
             cams = [CAMERAS[i % len(CAMERAS)] if i < len(CAMERAS) else f'{CAMERAS[i % 5]}'
@@ -298,7 +303,7 @@ def main() -> int:
                 continue
             try:
                 _print(run(cams, args.rate, args.seconds, args.hold_s, provider,
-                           args.pose2d_param, args.warmup, args.verbose))
+                           args.pose2d_param, args.warmup, args.verbose, args.fusion_param))
             except RuntimeError as exc:
                 print(f'{n} cam, {provider}: failed: {exc}', flush=True)
     print(f'bench_pipeline: load at the end {os.getloadavg()}')
