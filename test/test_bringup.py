@@ -184,7 +184,7 @@ def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
         assert spin_until(lambda: len(tracks) >= 3, 5.0), (
             log_path.read_text(), {c: len(v) for c, v in persons.items()}, len(tracks))
         assert all(m.camera_id == c for c in CAMS for m in persons[c])
-        assert tracks[-1].header.frame_id == 'map'
+        assert tracks[-1].header.frame_id == 'world'          # the rig YAML's world_frame
     finally:
         code = interrupt(proc, 40)
         log.close()
