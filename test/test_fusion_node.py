@@ -644,3 +644,31 @@ def test_stalled_clock_reported_as_error_naming_clock(harness_factory, scene):
     assert h.spin_until(clock_error, 5.0)
     status = h.latest_status('clock')
     assert '/clock stalled at 1000.000 s' in status.message
+
+
+def test_camera_below_its_usual_rate_warned_and_gaps_counted(harness_factory, scene):
+    """Issue 11 defect 11: a camera dropping to half rate gets a WARN; its gaps are counted."""
+    h = harness_factory()
+    t0 = base_ns(70)
+    slow = 'cam_03'
+    for cam, msg, _ in stream(scene, t0, range(70),
+                              skip=lambda c, f: c == slow and f >= 20 and f % 2):
+        h.publish(cam, msg)
+    assert h.wait_sets(70), dict(h.node.counts)       # the slow camera holds no set back
+    # 25 frames skipped; the last (69) is not followed by a stamp, so 24 gaps are visible.
+    assert h.node.sync.stats[slow].used == 45 and h.node.sync.stats[slow].lost == 24
+    h.diags.clear()
+
+    def warned():
+        s = h.latest_status(f'{slow} input')
+        return s is not None and s.level == b'\x01'
+
+    assert h.spin_until(warned, 3.0)
+    status = h.latest_status(f'{slow} input')
+    assert 'Hz from the stamps, below the usual 30.0 Hz' in status.message, status.message
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['lost upstream (stamp gaps)'] == '24'
+    sync = {kv.key: kv.value for kv in h.latest_status('synchronizer').values}
+    assert sync['lost upstream (stamp gaps)'] == '24'
+    other = h.latest_status('cam_01 input')
+    assert other.level == b'\x00', other.message
