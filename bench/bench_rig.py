@@ -289,6 +289,8 @@ def main() -> int:
         deadline = time.monotonic() + 120
         while probe.cameras_answering() < len(cams) and time.monotonic() < deadline:
             if procs[0].poll() is not None:
+                stop(procs[1:])
+                probe.close()
                 raise SystemExit(f'bringup exited with {procs[0].returncode}; see {logdir}')
             time.sleep(0.2)
         t_ready = time.time_ns()
