@@ -141,9 +141,10 @@ class JointKalman:
         live = (self.count > 0) & (dt <= self.max_gap_s + 1e-9)
         dt = np.where(live, np.maximum(dt, 0.0), 0.0)
         q = self.q
-        pxx = self.p_xx + 2 * dt * self.p_xv + dt * dt * self.p_vv + q * dt * dt * dt / 3
-        pxv = self.p_xv + dt * self.p_vv + q * dt * dt / 2
-        pvv = self.p_vv + q * dt
+        qdt = q * dt
+        pxv = self.p_xv + dt * (self.p_vv + qdt / 2)
+        pxx = self.p_xx + dt * (self.p_xv + pxv - qdt * dt / 6)   # = + 2dt pxv + dt^2 pvv
+        pvv = self.p_vv + qdt                                     # + q dt^3 / 3
         xp = self.x + self.v * dt[..., None]
         with np.errstate(invalid='ignore'):
             resid = z - xp
@@ -169,7 +170,10 @@ class JointKalman:
         self.rejects = np.where(start, 0, rejects)
         held = live & ~upd
         state = np.where(upd, _TRIANGULATED, np.where(held, _PREDICTED, _MISSING))
-        var = np.where(upd, self.p_xx, np.where(held, self.predict_variance(stamp), np.nan))
+        # a held joint: the predicted variance plus the drift it is not moved by (see
+        # predict_variance; dt is the time since its last update)
+        var = np.where(upd, self.p_xx, np.where(
+            held, pxx + (self.v * self.v) @ _XYZ / 3 * dt * dt, np.nan))
         x = np.where((upd | held)[..., None], self.x, np.nan)
         return KalmanUpdate(joints=x, state=state, variance=var, accepted=upd)
 
