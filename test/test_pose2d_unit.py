@@ -476,3 +476,13 @@ def test_bringup_shares_the_cores_among_the_cameras(capsys):
     assert bringup.main(['--rig', rig, '--cameras', *cams, '--dry-run',
                          '--pose2d-param', 'model.threads:=3']) == 0
     assert capsys.readouterr().out.count('threads: 3') == 4              # explicit value kept
+
+
+def test_int8_needs_real_calibration_frames(tmp_path, capsys):
+    with pytest.raises(fetch_mod.FetchError, match='no calibration images'):
+        fetch_mod.calibration_images(str(tmp_path))
+    for i in range(10):
+        (tmp_path / f'f{i:02d}.jpg').write_bytes(b'')
+    assert len(fetch_mod.calibration_images(str(tmp_path), limit=4)) == 4
+    assert cli_main(['model', 'fetch', '--int8', '--cache-dir', str(tmp_path)]) == 2
+    assert '--calibration-images' in capsys.readouterr().err
