@@ -289,8 +289,8 @@ def limits(cams: int = 4, persons: int = 2000, rate: float = 30.0) -> None:
     save_rig_yaml(scene.cameras, rig)
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
-    node = FusionNode(context=ctx, parameter_overrides=[Parameter('rig_config', value=rig),
-                                                         Parameter('log_throttle_s', value=60.0)])
+    node = FusionNode(context=ctx, parameter_overrides=[
+        Parameter('rig_config', value=rig), Parameter('log_throttle_s', value=60.0)])
     try:
         cam = next(iter(scene.cameras))
         rng = np.random.default_rng(0)

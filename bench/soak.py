@@ -107,8 +107,8 @@ def main() -> int:
 
     def on_diag(arr):
         for st in arr.status:
-            diag[st.name.split(': ', 1)[-1]] = (st.level[0], st.message,
-                                               {kv.key: kv.value for kv in st.values})
+            values = {kv.key: kv.value for kv in st.values}
+            diag[st.name.split(': ', 1)[-1]] = (st.level[0], st.message, values)
 
     node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', on_tracks,
                              reliable_qos(1000))
@@ -117,8 +117,8 @@ def main() -> int:
             for c in cams}
     clock = node.create_publisher(Clock, '/clock', 10)
     t_end = time.monotonic() + 30
-    while time.monotonic() < t_end and not all(p.get_subscription_count() for p in
-                                                pubs.values()):
+    while time.monotonic() < t_end and not all(
+            p.get_subscription_count() for p in pubs.values()):
         ex.spin_once(timeout_sec=0.05)
     base = 1_000 * NS
     start = time.monotonic()

@@ -107,7 +107,7 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path):
     last = {}
     for arr in diags:
         for st in arr.status:
-            last[st.name] = f'{st.message} ' + ', '.join(f'{kv.key}={kv.value}'
-                                                        for kv in st.values)
+            values = ', '.join(f'{kv.key}={kv.value}' for kv in st.values)
+            last[st.name] = f'{st.message} {values}'
     warnings += '\n' + '\n'.join(f'{k}: {v}' for k, v in sorted(last.items()))
     assert len(received) >= 0.98 * frames, warnings[-3000:]

@@ -581,7 +581,8 @@ class FusionNode(Node):
         Age the tracks while no input set arrives: empty steps, as the tracker would get them.
 
         Once no set came for ``fusion.max_coast_s`` (and longer than the synchroniser could
-        wait) and no input at all arrived for as long, every IDLE_STEP_S the tracks step with no views at the last set's stamp
+        wait) and no input at all arrived for as long, every IDLE_STEP_S the tracks step
+        with no views at the last set's stamp
         advanced by the node-clock time since (less that wait), so they go COASTING and are
         DELETED after ``fusion.max_coast_s`` as with empty sets; a message stamped before that
         time is then late. Under sim time a stalled /clock stops this too (and is reported in
