@@ -17,8 +17,8 @@ A deterministic corpus of bad input files for every format the CLI reads.
 
 ``build(root, data)`` writes valid base inputs made from the real Pose2Sim session in
 ``data`` (its calibration converted into every calibration format, 3 frames of its OpenPose
-detections, the tracks ``mv3dpose track`` makes of them, those tracks as MCAP and sqlite3
-bags) and then, beside them, one bad variant per case. Every variant is bad by construction
+detections, black images of the calibrated size, the tracks ``mv3dpose track`` makes of
+them, those tracks as MCAP and sqlite3 bags) and then, beside them, one bad variant per case. Every variant is bad by construction
 (a value out of range or of the wrong type, broken syntax, a hostile document, a corrupted
 or garbled bag), and each case lists the CLI invocations that read it. Nothing is random
 beyond a fixed seed, so a failure names a file that can be rebuilt.
@@ -146,6 +146,14 @@ def build_bases(base: Path, data: str) -> Dict[str, Path]:
                        '--storage', storage, '-q'])
         assert rc == 0, f'base {storage} bag: mv3dpose convert exited {rc}'
     out['openpose_file'] = sorted((out['poses'] / 'cam01_json').glob('*.json'))[1]
+    out['images'] = base / 'images'            # black frames of the calibrated size
+    import cv2
+    import numpy as np
+    for name, cam in cameras.items():
+        (out['images'] / name).mkdir(parents=True)
+        for k in range(2):
+            cv2.imwrite(str(out['images'] / name / f'{name}_{k:04d}.png'),
+                        np.zeros((cam.height, cam.width, 3), np.uint8))
     return out
 
 
@@ -162,8 +170,12 @@ def _convert_openpose_argv(calibration, poses, tmp: Path) -> List[str]:
             '-o', _out(tmp), '-q']
 
 
+def _convert_images_argv(calibration, images, tmp: Path) -> List[str]:
+    return ['convert', 'images', str(images), '-c', str(calibration), '-o', _out(tmp), '-q']
+
+
 def _calibration_cases(bases, root: Path) -> List[Case]:
-    """Bad calibration files of every format, each read by ``track`` and ``convert``."""
+    """Bad calibration files of every format, read by ``track`` and ``convert``."""
     import yaml
     docs = _calibration_docs(__import__('mv3dpose_ros.core.calibration', fromlist=['x'])
                              .load_calibration(str(bases['toml'])))
@@ -222,7 +234,8 @@ def _calibration_cases(bases, root: Path) -> List[Case]:
         path.write_text(text, encoding='utf-8', errors='surrogateescape')
         cases.append(Case(kind, str(path), [
             _track_argv(path, bases['poses'], root),
-            _convert_openpose_argv(path, bases['poses'], root)]))
+            _convert_openpose_argv(path, bases['poses'], root),
+            _convert_images_argv(path, bases['images'], root)]))
     # camera_info files, used through a rig's intrinsics_file
     info = docs['camera_info']
     info_edits = {'image_width': ['abc', BIG_INT, '-1'],
@@ -281,6 +294,27 @@ def _openpose_cases(bases, root: Path) -> List[Case]:
         cases.append(Case('openpose', str(bad), [
             _track_argv(bases['toml'], poses, root),
             _convert_openpose_argv(bases['toml'], poses, root)]))
+    return cases
+
+
+def _image_cases(bases, root: Path) -> List[Case]:
+    """Unreadable or mis-sized images among valid ones, read by ``convert images``."""
+    import cv2
+    import numpy as np
+    good = sorted((bases['images'] / 'cam_02').glob('*.png'))[1]
+    png = good.read_bytes()
+    small = cv2.imencode('.png', np.zeros((10, 10, 3), np.uint8))[1].tobytes()
+    deep = cv2.imencode('.png', np.zeros((1920, 1088), np.uint16))[1].tobytes()
+    variants = [b'', b'not an image', png[:len(png) // 2], png[:40], small, deep,
+                b'\x89PNG\r\n\x1a\n' + bytes(200)]
+    cases = []
+    for i, raw in enumerate(variants):
+        images = root / f'images_{i}'
+        shutil.copytree(bases['images'], images)
+        bad = images / good.parent.name / good.name
+        bad.write_bytes(raw)
+        cases.append(Case('image', str(bad),
+                          [_convert_images_argv(bases['toml'], images, root)]))
     return cases
 
 
@@ -429,7 +463,7 @@ def build(root: Path, data: str) -> List[Case]:
     root = Path(root)
     bases = build_bases(root / 'base', data)
     groups = {'calibration': _calibration_cases, 'openpose': _openpose_cases,
-              'tracks': _tracks_cases, 'bags': _bag_cases}
+              'images': _image_cases, 'tracks': _tracks_cases, 'bags': _bag_cases}
     cases: List[Case] = []
     for name, make in groups.items():
         folder = root / name
