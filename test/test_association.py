@@ -172,3 +172,24 @@ def test_camera_order_prefers_wide_angles():
     order = camera_order(np.array([c.R[2] for c in cams.values()]))
     assert order[0] == 0 and sorted(order.tolist()) == list(range(8))
     assert order[1] in (2, 6)                       # 90 degrees from camera 0 on a ring of 8
+
+
+def test_poses_too_sparse_to_match_are_pruned_with_identical_result():
+    """Poses with < min_joints visible joints leave the dense step; nothing else changes."""
+    rng = np.random.default_rng(8)
+    cams = make_scene(num_cameras=4, num_people=1, num_frames=1, fps=30.0, seed=2).cameras
+    joints = _people(rng, 5)
+    pts = _normalised(cams, joints)
+    vis = [np.ones(p.shape[:2], bool) for p in pts]
+    # Noise poses with 1-2 visible joints in every view (detector debris), in front.
+    debris = []
+    for p, v in zip(pts, vis):
+        extra = rng.uniform(-0.5, 0.5, (40, p.shape[1], 2))
+        ev = np.zeros((40, p.shape[1]), bool)
+        ev[:, :2] = rng.random((40, 2)) < 0.8
+        debris.append((np.concatenate([extra, p]), np.concatenate([ev, v])))
+    e = _essentials(cams)
+    got = associate([d[0] for d in debris], [d[1] for d in debris], e, min_joints=3)
+    ref = associate(pts, vis, e, min_joints=3)
+    assert len(got) == len(ref) == 5
+    assert sorted(map(tuple, got - 40)) == sorted(map(tuple, ref))

@@ -185,6 +185,12 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
         norm_coefficients = epipolar_norm_coefficients(essentials)
     q_all = quadratic_monomials(x)
     bounds = np.asarray(offsets).tolist()
+    # Poses with fewer than min_joints visible joints can share min_joints with nobody: they
+    # would only become single-view candidates, dropped at the end when min_views >= 2. Left
+    # out of the dense step, they cost nothing (the result is the same).
+    prune = min_views >= 2
+    if prune:
+        enough = (~np.isnan(x[..., 0])).sum(axis=1) >= min_joints
     members = np.full((num_n, num_c), -1, dtype=int)
     # Reference views (at most one per pose): pose, camera and one-hot candidate, filled in
     # place so the loop slices them instead of rebuilding arrays.
@@ -197,23 +203,31 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
     with np.errstate(invalid='ignore', divide='ignore'):
         for cam in (range(num_c) if order is None else order):
             lo, hi = bounds[cam], bounds[cam + 1]
-            if hi == lo:
+            if prune and not enough[lo:hi].all():
+                rows_of = (np.flatnonzero(enough[lo:hi]) + lo).tolist()
+            else:
+                rows_of = list(range(lo, hi))
+            if not rows_of:
                 continue
-            new = list(range(lo, hi))
+            new = list(rows_of)
             if num_k:
                 rp, rc = ref_pose[:num_m], ref_cam[:num_m]
-                dsum, dcnt = _epipolar_distance(x[lo:hi], x.take(rp, axis=0),
-                                                essentials[:, cam].take(rc, axis=0), q_all[lo:hi],
+                if len(rows_of) == hi - lo:
+                    x_new, q_new = x[lo:hi], q_all[lo:hi]
+                else:
+                    x_new, q_new = x.take(rows_of, axis=0), q_all.take(rows_of, axis=0)
+                dsum, dcnt = _epipolar_distance(x_new, x.take(rp, axis=0),
+                                                essentials[:, cam].take(rc, axis=0), q_new,
                                                 norm_coefficients[:, cam].take(rc, axis=0))
                 usable = dcnt >= min_joints
                 ref_of = onehot[:num_m, :num_k]              # [M, K] reference -> candidate
                 cost = (np.where(usable, dsum, 0.0) @ ref_of) / ((usable * dcnt) @ ref_of)
                 rows, cols = gated_assignment(cost, threshold)   # NaN: no usable view
                 for r, k in zip(rows.tolist(), cols.tolist()):
-                    members[k, cam] = lo + r
+                    members[k, cam] = rows_of[r]
                     new[r] = -1
                     if nref[k] < max_reference_views:
-                        ref_pose[num_m], ref_cam[num_m], onehot[num_m, k] = lo + r, cam, 1.0
+                        ref_pose[num_m], ref_cam[num_m], onehot[num_m, k] = rows_of[r], cam, 1.0
                         num_m += 1
                         nref[k] += 1
             for n in new:
