@@ -33,6 +33,7 @@ import threading
 import time
 
 from conftest import interrupt
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import cv2
 from google.protobuf.timestamp_pb2 import Timestamp
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
@@ -77,6 +78,9 @@ class Feeder:
         self.pubs = {c: self.node.create_publisher(Person2DArray, f'/{c}/persons_2d',
                                                    reliable_qos(20)) for c in feed.cameras}
         self.garbage = 0
+        self.diagnostics = []
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append,
+                                      reliable_qos(50))
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -258,7 +262,22 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
     write_png(picture, out)
     print(f'\nFoxglove client: {len(got)} messages ({len(tracks_rx)} tracks, {len(scene_rx)} '
           f'scene updates); picture {out}')
-    time.sleep(0.5)
+    # ... logged with its reason, and counted on /diagnostics.
+    executor = SingleThreadedExecutor(context=feeder.ctx)
+    executor.add_node(feeder.node)
+
+    def counted():
+        return [s for a in feeder.diagnostics for s in a.status
+                if s.name == 'foxglove_view: web view' and
+                {kv.key: kv.value for kv in s.values}.get('dropped tracks') == '1']
+    deadline = time.monotonic() + 20
+    while not counted() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+    executor.remove_node(feeder.node)
+    assert counted(), 'drop not counted on /diagnostics'
+    assert any(s.level == DiagnosticStatus.WARN for s in counted()) or \
+        any(s.level == DiagnosticStatus.WARN for a in feeder.diagnostics for s in a.status
+            if s.name == 'foxglove_view: web view')
     assert 'unreadable TrackedSkeletonArray dropped' in log_path.read_text()
     assert proc.poll() is None
 

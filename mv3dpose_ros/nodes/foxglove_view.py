@@ -30,7 +30,8 @@ so Foxglove (desktop, or the web app) connects with no ROS install:
   each image with the 2D skeletons of the detections carrying its stamp drawn on it.
 
 A separate process, so fusion_node stays lean and the WebSocket server cannot stall it. A message
-that cannot be read is counted, logged (rate-limited, naming topic and reason) and dropped.
+that cannot be read is logged (rate-limited, naming topic and reason), dropped, and counted on
+``/diagnostics`` (``foxglove_view: web view``, WARN in the cycle that saw new drops).
 """
 
 import argparse
@@ -49,7 +50,7 @@ from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.io.bag import get_typestore
 from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.ros import params as P
-from mv3dpose_ros.ros.diagnostics import RateLimitedLog
+from mv3dpose_ros.ros.diagnostics import Diagnostics, make_status, OK, RateLimitedLog, WARN
 from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, msg_to_tracks,
                                        person2d_array_to_numpy, stamp_to_ns)
@@ -160,6 +161,10 @@ class FoxgloveView(Node):
                     sensor_qos('best_effort', 5), raw=True))
         self._send_cameras()
         self._timer = self.create_timer(float(v('cameras_period_s')), self._send_cameras)
+        self._url = f'ws://{v("host")}:{self.port}'
+        self.diagnostics = Diagnostics(self, 1.0)
+        self.diagnostics.add_task(self._diag)
+        self._dropped_reported = 0
         self.get_logger().info(
             f'Foxglove WebSocket on ws://{v("host")}:{self.port} (Foxglove: Open connection -> '
             f'Foxglove WebSocket); channels {SCENE_TOPIC}, {CAMERAS_TOPIC}, {tracks_topic}'
@@ -244,6 +249,17 @@ class FoxgloveView(Node):
                 sec=stamp.sec, nsec=stamp.nanosec), frame_id=msg.header.frame_id,
                 data=jpeg.tobytes(), format='jpeg'), log_time=persons.stamp_ns)
         self.counts[f'{cam} images drawn'] += 1
+
+    def _diag(self) -> List[Any]:
+        """Report what arrived and what was dropped (WARN while new drops appear)."""
+        dropped = sum(n for k, n in self.counts.items() if k.startswith('dropped '))
+        level, message = OK, f'serving {self._url}'
+        if dropped > self._dropped_reported:
+            level = WARN
+            message = f'dropped {dropped - self._dropped_reported} unreadable messages'
+        self._dropped_reported = dropped
+        values = {'url': self._url, **dict(sorted(self.counts.items()))}
+        return [make_status(self.diagnostics.name('web view'), level, message, values=values)]
 
     def destroy_node(self) -> None:
         """Stop the WebSocket server, then destroy the node."""
