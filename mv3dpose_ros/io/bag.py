@@ -221,6 +221,7 @@ def _mcap_summary_crc(path: Path) -> None:
         start, _, crc = struct.unpack('<QQI', footer[9:])
         if crc == 0:
             return
+        start = start or size - 37      # no summary section: the CRC covers the footer only
         if not 8 <= start <= size - 37:
             raise BagError(f'{path}: MCAP footer points outside the file (summary at {start})')
         f.seek(start)
