@@ -185,6 +185,7 @@ class Pose2DNode(LifecycleNode):
         self._stamps = TimestampStats()
         self._infer_ms, self._path_ms = WindowStats(), WindowStats()
         self._stage_ms = {stage: WindowStats() for stage in STAGES}
+        self._capture_ms = WindowStats()          # header stamp -> persons_2d published
         self._last_input_ns: Optional[int] = None
         self._rejects_reported = 0
 
@@ -487,6 +488,7 @@ class Pose2DNode(LifecycleNode):
                                 float(self._param('debug_min_confidence')))
             debug.publish(numpy_to_image(drawn, msg.header, 'bgr8'))
         t_end = time.perf_counter()
+        capture_ms = (time.time_ns() - stamp) / 1e6
         timing = est.last_timing
         stages = {'decode': (t_decoded - t0) * 1e3, 'pre': timing.pre_ms,
                   'inference': timing.infer_ms, 'post': timing.post_ms,
@@ -503,6 +505,7 @@ class Pose2DNode(LifecycleNode):
             self._path_ms.add((t_end - t0) * 1e3)
             for name, ms in stages.items():
                 self._stage_ms[name].add(ms)
+            self._capture_ms.add(capture_ms)
         return out
 
     # -- diagnostics ----------------------------------------------------------------------------
@@ -516,6 +519,8 @@ class Pose2DNode(LifecycleNode):
             path50 = self._path_ms.percentile(50)
             stage50 = {f'Stage {name} median (ms)': st.percentile(50)
                        for name, st in self._stage_ms.items()}
+            stage50['Capture to publish median (ms)'] = self._capture_ms.percentile(50)
+            stage50['Capture to publish p95 (ms)'] = self._capture_ms.percentile(95)
         rate_in = in_values['Actual frequency (Hz)']
         values = {'Input frequency (Hz)': rate_in, **values, **ts_values,
                   'Inference latency median (ms)': infer50, 'Inference latency p95 (ms)': infer95,
