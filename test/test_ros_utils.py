@@ -16,6 +16,7 @@
 
 from dataclasses import dataclass, field
 import math
+import time
 from typing import List, Tuple
 
 from conftest import spin_until
@@ -90,6 +91,16 @@ def test_rate_limited_log_counts_suppressed():
     assert log('b', 'other key', int(0.6 * S))
     assert log('a', 'later', int(1.2 * S))
     assert lines == ['first', 'other key', 'later (1 similar messages suppressed)']
+
+
+def test_rate_limited_log_defaults_to_the_steady_clock():
+    """Without a caller clock it throttles on time.monotonic_ns (not a stallable /clock)."""
+    lines = []
+    log = RateLimitedLog(lines.append, period_s=0.2)
+    assert log('k', 'one') and not log('k', 'two')
+    time.sleep(0.25)
+    assert log('k', 'three')
+    assert lines == ['one', 'three (1 similar messages suppressed)']
 
 
 def test_make_status_formats_values():
