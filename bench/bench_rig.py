@@ -187,7 +187,7 @@ def drop_table(probe: Probe, published: Dict[str, str]) -> List[str]:
             if key in p2d:
                 parts.append(f'pose2d {key.split()[-1]} {p2d[key]}')
         parts += [f'pose2d {k.lower()} {v}' for k, v in p2d.items()
-                  if 'dropped' in k.lower() or 'rejected' in k.lower()]
+                  if any(w in k.lower() for w in ('dropped', 'rejected', 'skipped'))]
         parts += [f'fusion {k} {v}' for k, v in fus.items()
                   if any(w in k for w in ('dropped', 'late', 'rejected', 'outlier', 'lost',
                                           'missing')) and v not in ('0', '0.0')]
