@@ -33,8 +33,8 @@ import threading
 import time
 
 from conftest import interrupt
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import cv2
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from google.protobuf.timestamp_pb2 import Timestamp
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.fusion import Fusion
