@@ -318,6 +318,20 @@ def _image_cases(bases, root: Path) -> List[Case]:
     return cases
 
 
+def _params_cases(bases, root: Path) -> List[Case]:
+    """Bad ``--params`` files of ``mv3dpose track``."""
+    texts = [ALIAS_BOMB, 'fusion: ' + DEEP, 'theta_norm: abc\n', 'no_such_field: 1\n',
+             'min_views: 1\n', 'max_coast_s: .nan\n', '1: 2\n', 'theta_norm: ' + BIG_INT,
+             '[1, 2]\n', '\tbroken: [\n']
+    cases = []
+    for i, text in enumerate(texts):
+        path = root / f'params_{i}.yaml'
+        path.write_text(text)
+        argv = _track_argv(bases['toml'], bases['poses'], root) + ['--params', str(path)]
+        cases.append(Case('track_params', str(path), [argv]))
+    return cases
+
+
 def _tracks_cases(bases, root: Path) -> List[Case]:
     """Tracks JSON Lines with one bad line, read by ``convert``, ``render`` and ``eval``."""
     lines = bases['tracks'].read_text().splitlines()
@@ -463,7 +477,8 @@ def build(root: Path, data: str) -> List[Case]:
     root = Path(root)
     bases = build_bases(root / 'base', data)
     groups = {'calibration': _calibration_cases, 'openpose': _openpose_cases,
-              'images': _image_cases, 'tracks': _tracks_cases, 'bags': _bag_cases}
+              'images': _image_cases, 'params': _params_cases, 'tracks': _tracks_cases,
+              'bags': _bag_cases}
     cases: List[Case] = []
     for name, make in groups.items():
         folder = root / name

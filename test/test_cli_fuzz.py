@@ -15,7 +15,7 @@
 """
 Every CLI command on a corpus of bad files: no traceback, a non-zero exit, the file named.
 
-The corpus (``fuzz_corpus.py``: 416 bad files in every format the commands read) is built
+The corpus (``fuzz_corpus.py``: 426 bad files in every format the commands read) is built
 from the real Pose2Sim session. Commands run in-process through ``cli.main`` (the console
 script's own entry point) so that 1000 runs take a minute; a sample also runs as real
 processes. Also here: atomic outputs (a run that fails midway leaves no file).
@@ -62,7 +62,8 @@ def test_corpus_is_large_and_covers_every_format(corpus):
     kinds = {c.kind for c in cases}
     assert len(cases) >= 300
     assert kinds >= {'panoptic', 'voxelpose', 'pose2sim', 'rig', 'camera_info', 'openpose',
-                     'image', 'tracks_jsonl', 'bag_mcap', 'bag_sqlite3', 'partial_bag'}
+                     'image', 'track_params', 'tracks_jsonl', 'bag_mcap', 'bag_sqlite3',
+                     'partial_bag'}
     commands = {' '.join(a[:2]) if a[0] in ('bag', 'convert') else a[0]
                 for c in cases for a in c.argvs}
     assert commands == {'track', 'eval', 'render', 'convert openpose', 'convert tracks',

@@ -97,12 +97,13 @@ def load_fusion_params(path: str) -> dict:
     In a parameter file the first ``ros__parameters`` section with a ``fusion`` mapping is
     used. Unknown field names raise ValueError naming them and the file.
     """
-    import yaml
-
+    from mv3dpose_ros.core.files import load_yaml, LoadError, read_text
     from mv3dpose_ros.core.fusion import FusionConfig
 
-    with open(path, encoding='utf-8') as f:
-        data = yaml.safe_load(f)
+    try:
+        data = load_yaml(read_text(path, 16 * 1024 * 1024))
+    except LoadError as e:
+        raise ValueError(f'{path}: {e}') from None
     if not isinstance(data, dict):
         raise ValueError(f'{path}: expected a mapping of FusionConfig fields')
 
@@ -121,10 +122,14 @@ def load_fusion_params(path: str) -> dict:
     if params is None:
         params = data
     known = {f.name for f in dataclasses.fields(FusionConfig)}
-    unknown = sorted(set(params) - known)
+    unknown = sorted(str(k) for k in set(params) - known)
     if unknown:
         raise ValueError(f'{path}: unknown FusionConfig field(s) {unknown}; '
                          f'known: {sorted(known)}')
+    try:
+        FusionConfig(**params).validate()      # wrong types and ranges, named with the file
+    except (TypeError, ValueError) as e:
+        raise ValueError(f'{path}: {e}') from None
     return dict(params)
 
 
