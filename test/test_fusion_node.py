@@ -639,13 +639,18 @@ def test_stalled_clock_reported_as_error_naming_clock(harness_factory, scene):
     assert h.spin_until(lambda: h.node.get_clock().now().nanoseconds == 1000 * NS, 5.0)
     h.diags.clear()
 
-    def clock_error():
+    def clock_error():      # (a status from before /clock arrived may still be in flight)
         s = h.latest_status('clock')
-        return s is not None and s.level == b'\x02'
+        return s is not None and s.level == b'\x02' and 'stalled' in s.message
 
     assert h.spin_until(clock_error, 5.0)
     status = h.latest_status('clock')
     assert '/clock stalled at 1000.000 s' in status.message
+    # Durations are steady-clock seconds, not sim time since 0 ("no input for 1000 s").
+    silent = h.latest_status('cam_01 input')
+    if silent.message != 'receiving':        # within silent_warn_s of the start
+        assert silent.message.startswith('no input on /cam_01/persons_2d for ')
+        assert float(silent.message.split(' for ')[1].split(' s')[0]) < 60.0
 
 
 def test_camera_below_its_usual_rate_warned_and_gaps_counted(harness_factory, scene):
