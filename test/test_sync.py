@@ -406,3 +406,23 @@ def test_sustained_forward_jump_of_the_rig_continues_without_reset():
     assert len(out) == 30 and all(s.complete for s in out)
     assert sum(st.outliers for st in sync.stats.values()) == 0
     assert all(sync.stats[c].lost == skip for c in CAMS)
+
+
+def test_cameras_lagging_behind_on_an_overloaded_host_are_late_not_a_reset():
+    """Two cameras' queues fall ever further behind (their own stamps still advance)."""
+    sync = make()
+    out = feed(sync, flat(frames(40)))
+    arrival = 40 * PERIOD
+    lag_frame = 40
+    for f in range(40, 140):
+        arrival += PERIOD
+        out += sync.add('cam0', T0 + f * PERIOD, ('cam0', f), arrival).sets
+        if f % 2:                                  # the others drain at half the pace
+            for c in ('cam1', 'cam2'):
+                res = sync.add(c, T0 + lag_frame * PERIOD, (c, lag_frame), arrival)
+                assert not res.reset
+                out += res.sets
+            lag_frame += 1
+    assert (139 - lag_frame) * PERIOD > 1.5 * S       # more than jump_s behind at the end
+    assert sync.resets == 0 and sum(st.outliers for st in sync.stats.values()) == 0
+    assert sync.stats['cam1'].late > 0

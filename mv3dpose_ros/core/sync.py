@@ -263,7 +263,7 @@ class StreamSynchronizer:
         if self._first_arrival_ns is None:
             self._first_arrival_ns = now
         entry = (stamp_ns, next(self._seq), now, msg)
-        off = self._outlier_offset(stamp_ns, now)
+        off = self._outlier_offset(camera_id, stamp_ns, now)
         if off is None:
             self._drop_suspects(camera_id)           # earlier outliers were isolated glitches
             return self._accept(camera_id, entry, now)
@@ -331,15 +331,23 @@ class StreamSynchronizer:
     def _jump_cameras(self) -> int:
         return min(2, len(self.camera_ids))
 
-    def _outlier_offset(self, stamp_ns: int, now: int) -> Optional[int]:
-        """Return how far ``stamp_ns`` is from the stream time if beyond ``jump_s``, else None."""
+    def _outlier_offset(self, cam: str, stamp_ns: int, now: int) -> Optional[int]:
+        """
+        Return how far ``stamp_ns`` is from the stream time if beyond ``jump_s``, else None.
+
+        Ahead: beyond the newest accepted stamp advanced by the arrival time since. Behind:
+        before it and also before the camera's own newest stamp, by ``jump_s`` each; a camera
+        that merely lags (its own stamps still advance, e.g. its input queue is behind on an
+        overloaded host) is no outlier: its messages are late, not a new timeline.
+        """
         if self._ref is None:
             return None
         ref_stamp, ref_arrival = self._ref
         ahead = stamp_ns - (ref_stamp + max(0, now - ref_arrival))
         if ahead > self._jump:
             return ahead
-        if stamp_ns < ref_stamp - self._jump:
+        own = self.stats[cam].last_seen_ns
+        if stamp_ns < ref_stamp - self._jump and (own is None or stamp_ns < own - self._jump):
             return stamp_ns - ref_stamp
         return None
 
@@ -393,7 +401,7 @@ class StreamSynchronizer:
         order += sorted((e for c in self.camera_ids if c not in group
                          for e in ((c, x) for x in held[c])), key=lambda ce: ce[1][1])
         for c, entry in order:
-            off_c = self._outlier_offset(entry[0], now)
+            off_c = self._outlier_offset(c, entry[0], now)
             if off_c is None:
                 result.sets.extend(self._accept(c, entry, now).sets)
             else:
