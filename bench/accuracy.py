@@ -33,6 +33,7 @@ import os
 
 from mv3dpose_ros.core.calibration import load_calibration
 from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.output import LiveOutput
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.sequence import evaluate_run, GroundTruth, load_ground_truth
 from mv3dpose_ros.sim import DetectorNoise, make_scene
@@ -44,12 +45,19 @@ DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
 
 
 def run_fusion(cameras, layout, views_seq, stamps):
-    """Return ``frame -> (ids, poses)`` of confirmed tracks and the median reprojection px."""
+    """
+    Return ``frame -> (ids, poses)`` of the live output and the median reprojection px.
+
+    The live output is what fusion_node publishes on ``~/tracks`` (``core.output``):
+    confirmed and (for ``publish_coast_s``) coasting tracks.
+    """
     fusion = Fusion(cameras, layout)
+    output = LiveOutput(fusion.config.publish_coast_s)
     num_j = fusion.layout.num_joints
     hyps, reproj = {}, []
     for f, (views, stamp) in enumerate(zip(views_seq, stamps)):
-        tracks = [t for t in fusion.step(views, stamp) if t.state == TrackState.CONFIRMED]
+        tracks = [t for t in output.step(fusion.step(views, stamp), stamp)[0]
+                  if t.state in (TrackState.CONFIRMED, TrackState.COASTING)]
         hyps[f] = (np.array([t.track_id for t in tracks], dtype=int),
                    np.array([t.joints for t in tracks]).reshape(len(tracks), num_j, 3))
         for t in tracks:
