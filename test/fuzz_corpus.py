@@ -18,9 +18,10 @@ A deterministic corpus of bad input files for every format the CLI reads.
 ``build(root, data)`` writes valid base inputs made from the real Pose2Sim session in
 ``data`` (its calibration converted into every calibration format, 3 frames of its OpenPose
 detections, black images of the calibrated size, the tracks ``mv3dpose track`` makes of
-them, those tracks as MCAP and sqlite3 bags) and then, beside them, one bad variant per case. Every variant is bad by construction
-(a value out of range or of the wrong type, broken syntax, a hostile document, a corrupted
-or garbled bag), and each case lists the CLI invocations that read it. Nothing is random
+them, those tracks as MCAP and sqlite3 bags) and then, beside them, one bad variant per
+case. Every variant is bad by construction (a value out of range or of the wrong type, broken
+syntax, a hostile document, a corrupted or garbled bag), and each case lists the CLI
+invocations that read it. Nothing is random
 beyond a fixed seed, so a failure names a file that can be rebuilt.
 
 Run as a script to write the corpus somewhere and look at it::
