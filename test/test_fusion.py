@@ -169,3 +169,44 @@ def test_same_inputs_same_outputs():
         assert [t.track_id for t in fa] == [t.track_id for t in fb]
         for ta, tb in zip(fa, fb):
             assert np.array_equal(ta.joints, tb.joints, equal_nan=True)
+
+
+def test_uncertainty_is_honest_and_follows_the_detector_noise():
+    errors, variances, noise = {}, {}, {}
+    for scale in (1.0, 2.0):
+        scene = make_scene(num_cameras=4, num_people=3, num_frames=80, seed=6,
+                           noise=DetectorNoise().scaled(scale))
+        fusion, outputs = _run(scene)
+        noise[scale] = fusion.noise_norm
+        err, var = [], []
+        for t, out in enumerate(outputs[20:], 20):
+            for tr in out:
+                if tr.state != TrackState.CONFIRMED:
+                    continue
+                ok = tr.joint_state == JointState.TRIANGULATED
+                assert (tr.joint_variance[ok] > 0).all()        # finite and positive
+                assert np.isnan(tr.joint_variance[tr.joint_state == JointState.MISSING]).all()
+                cov = tr.position_covariance
+                assert np.isfinite(cov).all() and cov[0, 0] > 0 and np.allclose(cov, cov.T)
+                d = np.linalg.norm(scene.gt[t] - tr.joints[None], axis=-1)          # [M, J]
+                who = int(np.argmin(np.nanmean(d, axis=1)))
+                err.extend((tr.joints[ok] - scene.gt[t][who][ok]).ravel())
+                var.extend(np.repeat(tr.joint_variance[ok], 3))
+        errors[scale], variances[scale] = np.array(err), np.array(var)
+    # the estimated 2D noise follows the detector, and so does the reported variance
+    assert 1.6 < noise[2.0] / noise[1.0] < 2.5
+    assert np.median(variances[2.0]) > 2 * np.median(variances[1.0])
+    for scale in (1.0, 2.0):        # per-axis error spread close to the claimed variance
+        ratio = np.std(errors[scale]) / np.sqrt(np.mean(variances[scale]))
+        assert 0.6 < ratio < 1.5, (scale, ratio)
+
+
+def test_stamps_are_exact_nanoseconds():
+    scene = make_scene(num_cameras=3, num_people=2, num_frames=10, seed=1)
+    fusion = Fusion(scene.cameras, scene.layout)
+    base = 1_796_000_000_123_456_789          # beyond what float seconds hold to the ns
+    for k, (stamp, views) in enumerate(scene.frames()):
+        out = fusion.step(views, base / 1e9 + stamp, base + k * 40_000_001)
+    for tr in out:
+        assert tr.last_observed_ns == base + 9 * 40_000_001
+        assert tr.first_seen_ns == base
