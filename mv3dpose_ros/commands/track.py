@@ -25,10 +25,11 @@ live publication rules (``core.output.TrackPublisher``): ``--smooth causal`` wri
 ``fusion_node`` publishes on ``~/tracks``, and ``--smooth fixed-lag --lag-frames L`` exactly
 what it publishes on ``~/tracks_smoothed`` with ``smoothed_lag_frames: L``
 (``core.smoothing.FixedLagSmoother``; each frame is written with its own number and stamp,
-and the last L frames, which the node publishes only when it stops, are flushed at the end).
+and the last L frames, which the node publishes once L more sets, its idle steps after the
+input stops or a reset come, are flushed at the end).
 ``--smooth none`` writes every track ``Fusion.step`` keeps (internal ids, tentative ones too)
 with the accepted raw triangulations. ``--smooth offline`` (the default for this batch command,
-as in the paper) runs fusion without the causal filter and then applies
+as in the paper) takes the accepted raw triangulations (not the filtered joints) and applies
 the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``)
 after settling the run with hindsight (``core.hindsight.settle_tracks``: fragments of one
 person linked into one id, tracks confirmed from their first frame, ghosts and predictions
