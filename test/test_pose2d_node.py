@@ -424,7 +424,7 @@ def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
             img, Header(stamp=ns_to_stamp(990 * NS), frame_id='f'), 'bgr8'))
         nodes[0]._on_image(back)
         assert nodes[0]._pending is back
-        assert not nodes[0].set_parameters([Parameter('inference_rate_hz', value=-1.0)])[
+        assert not nodes[0].set_parameters([Parameter('inference_rate_hz', value=2000.0)])[
             0].successful
         nodes[0].set_parameters([Parameter('inference_rate_hz', value=0.0)])
         nodes[0]._on_image(back)
@@ -432,3 +432,84 @@ def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
     finally:
         for node in nodes:
             node.destroy_node()
+
+
+def test_auto_rate_chain_grids_are_nested():
+    """Every slower auto rate infers a subset of the instants of every faster one."""
+    from mv3dpose_ros.nodes.pose2d_node import AUTO_RATES_HZ, grid_period_ns, on_new_window
+    assert all(a == 2 * b for a, b in zip(AUTO_RATES_HZ, AUTO_RATES_HZ[1:]))
+    rng = np.random.default_rng(0)
+    # 25 Hz free-running camera with capture jitter and missing frames, 60 s
+    stamps = sorted(int(1000 * NS + k * 40_000_000 + rng.integers(-3_000_000, 3_000_000))
+                    for k in range(1500) if rng.random() > 0.1)
+    taken = {}
+    for rate in AUTO_RATES_HZ:
+        last, sel = None, set()
+        for s in stamps:
+            if on_new_window(s, last, grid_period_ns(rate)):
+                sel.add(s)
+                last = s
+        taken[rate] = sel
+    for fast, slow in zip(AUTO_RATES_HZ, AUTO_RATES_HZ[1:]):
+        assert taken[slow] <= taken[fast] and len(taken[slow]) < len(taken[fast])
+    assert abs(len(taken[0.625]) - 60 * 0.625) <= 1
+
+
+def test_auto_rate_choice_follows_load_with_hysteresis():
+    from mv3dpose_ros.nodes.pose2d_node import AutoInferenceRate
+    auto = AutoInferenceRate()
+    t = 0.0
+
+    def run(seconds_per_image, fps, n, step_s=1.0):
+        nonlocal t
+        changes = []
+        for _ in range(n):
+            for _ in range(int(fps * step_s)):
+                auto.add_stamp(int(1000 * NS + t * NS))
+                t += 1.0 / fps
+            auto.add_processing(seconds_per_image)
+            new = auto.update(t)
+            if new is not None:
+                changes.append(new)
+        return changes
+
+    assert run(0.05, 10.0, 10) == []                # 50 ms per 100 ms frame: every image
+    assert auto.rate_hz == 0.0
+    # 400 ms per image at 10 Hz: at most 2.5 Hz, 0.7 of it -> 1.25 Hz, after the dwell time
+    assert run(0.4, 10.0, 10) == [1.25]
+    assert run(0.4, 10.0, 30) == []                 # steady: no flapping
+    assert run(0.5, 10.0, 10) == []                 # 1.25 Hz x 0.5 s = 0.62 < 0.9: kept
+    assert run(0.8, 10.0, 10) == [0.625]            # 1.0 > 0.9: one step slower
+    assert run(0.55, 10.0, 10) == []                # 2 x 0.625 x 0.55 > 0.6: not faster yet
+    assert run(0.2, 10.0, 10) == [1.25, 2.5]        # faster again, one step per dwell
+    assert run(0.02, 10.0, 10) == [0.0]             # keeps up: every image
+    assert 'images at 10.00 Hz' in auto.reason
+
+
+def test_inference_rate_parameter_accepts_auto_int_and_float(ros_context):
+    from mv3dpose_ros.nodes.pose2d_node import parse_inference_rate, Pose2DNode
+    assert parse_inference_rate('auto') == -1.0 and parse_inference_rate(-1) == -1.0
+    assert parse_inference_rate(1) == 1.0 and parse_inference_rate('2.5') == 2.5
+    for bad in ('fast', 1e6, float('nan'), True):
+        with pytest.raises(ValueError, match='inference_rate_hz'):
+            parse_inference_rate(bad)
+    node = Pose2DNode(context=ros_context, namespace='/rate', parameter_overrides=[
+        Parameter('autostart', value=False)])
+    try:
+        assert node._auto is not None and node.inference_rate_hz == 0.0     # default: auto
+        assert node.set_parameters([Parameter('inference_rate_hz', value=1)])[0].successful
+        assert node._auto is None and node.inference_rate_hz == 1.0
+        assert node.set_parameters([Parameter('inference_rate_hz', value='auto')])[0].successful
+        assert node._auto is not None
+        res = node.set_parameters([Parameter('inference_rate_hz', value='often')])[0]
+        assert not res.successful and 'inference_rate_hz' in res.reason
+        assert node.set_parameters([Parameter('inference_rate_hz', value=0)])[0].successful
+        assert node._auto is None and node.inference_rate_hz == 0.0
+    finally:
+        node.destroy_node()
+    bad = Pose2DNode(context=ros_context, namespace='/rate2', parameter_overrides=[
+        Parameter('inference_rate_hz', value='often')])
+    try:
+        assert not bad.active and 'inference_rate_hz' in bad.error
+    finally:
+        bad.destroy_node()

@@ -426,3 +426,65 @@ def test_cameras_lagging_behind_on_an_overloaded_host_are_late_not_a_reset():
     assert (139 - lag_frame) * PERIOD > 1.5 * S       # more than jump_s behind at the end
     assert sync.resets == 0 and sum(st.outliers for st in sync.stats.values()) == 0
     assert sync.stats['cam1'].late > 0
+
+
+def _lagging_rig(sync, n_sets, lag_ns, period=S, base=1500 * MS):
+    """
+    1 Hz sets of 4 cameras whose detections arrive ``base`` after capture, cam3 ``lag`` later.
+
+    Events go in arrival order with a poll at each arrival (what the node's timer does).
+    """
+    cams = ['cam0', 'cam1', 'cam2', 'cam3']
+    events = sorted(((c, T0 + f * period, f * period + base + (lag_ns if c == 'cam3' else 0))
+                     for f in range(n_sets) for c in cams), key=lambda e: e[2])
+    out = []
+    for cam, stamp, now in events:
+        out += sync.poll(now)
+        out += sync.add(cam, stamp, (cam, stamp), now).sets
+    return out + sync.poll(events[-1][2] + 10 * S)
+
+
+def test_wait_adapts_to_a_camera_whose_detections_come_seconds_later():
+    """A steady 1.2 s inference skew: learned from the late messages, then no set loses it."""
+    fixed = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
+                               SyncConfig(max_wait_s=0.1, max_wait_cap_s=0.0))
+    out = _lagging_rig(fixed, 20, 1200 * MS)
+    assert fixed.max_wait_ns == 100 * MS
+    assert all(s.missing == ('cam3',) for s in out) and fixed.stats['cam3'].late >= 19
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    out = _lagging_rig(sync, 20, 1200 * MS)
+    # The first sets measure the spread (8 samples, the late messages included); from then on
+    # every set waits for cam3.
+    assert sync.stats['cam3'].late <= 3 and sync.stats['cam3'].used >= 17
+    assert all(s.complete for s in out if s.stamp_ns >= T0 + 3 * S)
+    assert len([s for s in out if s.stamp_ns >= T0 + 3 * S]) == 17
+    assert sync.spread_p95_s == pytest.approx(1.2)
+    assert sync.max_wait_ns == pytest.approx(1.3 * 1200 * MS, rel=1e-6)
+
+
+def test_adaptive_wait_is_capped_and_returns_when_the_skew_goes():
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
+                              SyncConfig(max_wait_s=0.1, max_wait_cap_s=1.0))
+    out = _lagging_rig(sync, 10, 1200 * MS)
+    assert sync.max_wait_ns == 1000 * MS          # capped: cam3 stays late, others go on
+    assert all(not s.complete for s in out) and sync.stats['cam3'].late >= 9
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    _lagging_rig(sync, 10, 600 * MS)
+    assert sync.max_wait_ns == pytest.approx(1.3 * 600 * MS, rel=1e-6)
+    # 40 on-time sets later the recent spreads are all small: back to max_wait_s.
+    cams = ['cam0', 'cam1', 'cam2', 'cam3']
+    for f in range(10, 50):
+        for c in cams:
+            sync.add(c, T0 + f * S, c, f * S + 1500 * MS)
+    assert sync.max_wait_ns == 100 * MS
+
+
+def test_cameras_lagging_seconds_behind_capture_are_no_outliers():
+    """Steady 1-3 s capture -> detection latency: every set is emitted, nothing is an outlier."""
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    out = _lagging_rig(sync, 30, 1500 * MS, base=1000 * MS)      # 1.0 s and 2.5 s
+    assert sync.resets == 0 and sync.forward_jumps == 0
+    assert sum(st.outliers for st in sync.stats.values()) == 0
+    # Only the sets before the wait learned the 1.5 s skew miss the lagging camera.
+    assert len(out) >= 28 and sync.stats['cam3'].used >= 26
+    assert all(s.complete for s in out if s.stamp_ns >= T0 + 4 * S)

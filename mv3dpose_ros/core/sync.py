@@ -39,6 +39,12 @@ cameras whose inference finishes at different times lose no set:
   ``slop_note`` says so (the node logs it naming the parameter ``sync.slop_s``).
 * A message whose stamp is not newer than ``pivot + slop`` of the last decided pivot arrives
   too late for its set: it is dropped and counted as ``late``.
+* The wait adapts to the rig: the arrival spread of each set's messages (arrival minus the
+  arrival of the set's first message, on the arrival clock, late messages included) is kept
+  for the recent messages, and the wait used is ``max(max_wait_s, 1.3 x p95 spread)``, at
+  most ``max_wait_cap_s`` (a cap at or below ``max_wait_s`` keeps the wait fixed). Cameras
+  whose inference finishes seconds apart on an overloaded host then lose no set, and a rig
+  that keeps up waits no longer than ``max_wait_s``.
 * Stamps more than ``jump_s`` away from the stream's time (the newest accepted stamp,
   advanced by the arrival time since) are *outliers*: held aside, and dropped and counted
   when the camera's next message is normal again. Only a sustained jump (``jump_confirm``
@@ -68,6 +74,12 @@ PERIOD_WINDOW = 16
 PERIOD_MIN_STEPS = 4
 #: Slop used while no camera's period is known yet (half a 60 fps period).
 INITIAL_SLOP_S = 0.008
+#: Arrival spreads kept for the adaptive wait, and needed before it adapts.
+SPREAD_WINDOW, SPREAD_MIN = 128, 8
+#: The adaptive wait is this factor times the p95 of the recent arrival spreads.
+SPREAD_FACTOR = 1.3
+#: Decided sets remembered to measure how late their late messages came.
+DECIDED_WINDOW = 64
 
 
 @dataclass
@@ -78,6 +90,8 @@ class SyncConfig:
     #                                  observed frame period (a wider value is narrowed to it)
     max_wait_s: float = 0.1          # arrival time [s] a set waits for missing cameras after
     #                                  its first message arrived (covers inference skew)
+    max_wait_cap_s: float = 2.0      # the wait adapts up to this: 1.3 x p95 of the measured
+    #                                  arrival spread of the sets (<= max_wait_s: fixed wait)
     min_views: int = 2               # partial sets with fewer cameras are dropped
     max_queue: int = 30              # buffered messages per camera; beyond, the oldest set is
     #                                  decided at once (counted as overflow)
@@ -92,6 +106,8 @@ class SyncConfig:
             raise ValueError(f'sync slop_s must be >= 0, got {self.slop_s}')
         if not (math.isfinite(self.max_wait_s) and self.max_wait_s >= 0.0):
             raise ValueError(f'sync max_wait_s must be >= 0, got {self.max_wait_s}')
+        if not (math.isfinite(self.max_wait_cap_s) and self.max_wait_cap_s >= 0.0):
+            raise ValueError(f'sync max_wait_cap_s must be >= 0, got {self.max_wait_cap_s}')
         if self.min_views < 1:
             raise ValueError(f'sync min_views must be >= 1, got {self.min_views}')
         if self.max_queue < 1:
@@ -216,6 +232,10 @@ class StreamSynchronizer:
         self._clock = clock                          # arrival clock when add() gets no now_ns
         self._slop_cfg = int(round(self.config.slop_s * NS_PER_S))
         self._max_wait = int(round(self.config.max_wait_s * NS_PER_S))
+        self._wait_cap = max(self._max_wait, int(round(self.config.max_wait_cap_s * NS_PER_S)))
+        self.max_wait_ns = self._max_wait            # the wait in use (adaptive, see above)
+        self._spreads: Deque[int] = deque(maxlen=SPREAD_WINDOW)
+        self._decided: Deque[Tuple[int, int, int]] = deque(maxlen=DECIDED_WINDOW)
         self._jump = int(round(self.config.jump_s * NS_PER_S))
         self._seq = itertools.count()
         # Per camera, entries sorted by stamp; outliers held aside per camera.
@@ -310,6 +330,7 @@ class StreamSynchronizer:
         self.last_emitted_ns = None
         self._consumed_ns = None
         self._ref = None
+        self._decided.clear()                        # stamps start again; spreads are kept
         self.resets += 1
 
     def pending(self) -> int:
@@ -338,7 +359,8 @@ class StreamSynchronizer:
         Ahead: beyond the newest accepted stamp advanced by the arrival time since. Behind:
         before it and also before the camera's own newest stamp, by ``jump_s`` each; a camera
         that merely lags (its own stamps still advance, e.g. its input queue is behind on an
-        overloaded host) is no outlier: its messages are late, not a new timeline.
+        overloaded host, or it has sent nothing yet) is no outlier: its messages are late, not a
+        new timeline.
         """
         if self._ref is None:
             return None
@@ -347,7 +369,9 @@ class StreamSynchronizer:
         if ahead > self._jump:
             return ahead
         own = self.stats[cam].last_seen_ns
-        if stamp_ns < ref_stamp - self._jump and (own is None or stamp_ns < own - self._jump):
+        # A camera with no accepted stamp yet has no timeline to jump from: one whose first
+        # detections come seconds after the others' (a slower inference) merely lags.
+        if stamp_ns < ref_stamp - self._jump and own is not None and stamp_ns < own - self._jump:
             return stamp_ns - ref_stamp
         return None
 
@@ -419,6 +443,7 @@ class StreamSynchronizer:
         if self._consumed_ns is not None and stamp_ns <= self._consumed_ns:
             stats.dropped += 1
             stats.late += 1
+            self._record_lateness(stamp_ns, entry[2])
             return AddResult(accepted=False, kind='late', reason=(
                 f'camera {cam!r}: stamp {stamp_ns / NS_PER_S:.6f} s arrived after its set was '
                 f'decided (sets up to {self._consumed_ns / NS_PER_S:.6f} s are emitted or '
@@ -480,8 +505,8 @@ class StreamSynchronizer:
             if latest is not None and latest > hi and (
                     not period or latest - period > hi or latest - period + tol < pivot):
                 continue        # it sent a later frame, and the one before that is not ours
-            if now - last_arrival > self._max_wait + period and (
-                    latest is None or latest < pivot - self._max_wait):
+            if now - last_arrival > self.max_wait_ns + period and (
+                    latest is None or latest < pivot - self.max_wait_ns):
                 continue     # silent: nothing for a while, and its last frame is long past
                 #              (a node stalled by the CPU sees every camera late, not silent)
             if period and latest is not None and latest < pivot and \
@@ -502,17 +527,49 @@ class StreamSynchronizer:
                 if any(len(b) > self.config.max_queue for b in self._buffers.values()):
                     self.overflow_decisions += 1
                     self.decisions['queue full'] += 1
-                elif now - first_arrival >= self._max_wait:
+                elif now - first_arrival >= self.max_wait_ns:
                     self.decisions['waited max_wait'] += 1
                 elif self._may_still_come(chosen, pivot, now):
                     return out
                 else:
                     self.decisions['no camera can still come'] += 1
+            self._remember(pivot, chosen, first_arrival, flush)
             if len(chosen) >= self.config.min_views:
                 out.append(self._emit(pivot, chosen))
             else:
                 self._drop_through(pivot + self.slop_ns, 'too_few_views')
                 self.pivots_dropped += 1
+
+    @property
+    def spread_p95_s(self) -> float:
+        """Return the p95 arrival spread of the recent sets' messages [s] (NaN before any)."""
+        if not self._spreads:
+            return math.nan
+        ordered = sorted(self._spreads)
+        return ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))] / NS_PER_S
+
+    def _remember(self, pivot: int, chosen: Dict[str, int], first: int, flush: bool) -> None:
+        """Record a decided set's window and its members' arrival spread (adaptive wait)."""
+        if flush:
+            return
+        self._decided.append((pivot, pivot + self.slop_ns, first))
+        for cam, i in chosen.items():
+            self._spreads.append(self._buffers[cam][i][2] - first)
+        self._adapt_wait()
+
+    def _record_lateness(self, stamp_ns: int, arrival_ns: int) -> None:
+        """Record how long after its set's first message a late message arrived."""
+        for lo, hi, first in reversed(self._decided):
+            if lo <= stamp_ns <= hi:
+                self._spreads.append(max(0, arrival_ns - first))
+                self._adapt_wait()
+                return
+
+    def _adapt_wait(self) -> None:
+        if len(self._spreads) < SPREAD_MIN:
+            return
+        want = int(SPREAD_FACTOR * self.spread_p95_s * NS_PER_S)
+        self.max_wait_ns = min(max(self._max_wait, want), self._wait_cap)
 
     def _emit(self, pivot: int, chosen: Dict[str, int]) -> SyncedSet:
         members = {cam: self._buffers[cam][i] for cam, i in chosen.items()}

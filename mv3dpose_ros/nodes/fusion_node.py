@@ -29,7 +29,7 @@ rclpy's deserialiser accepts (bytes it refuses are dropped as 'malformed'); ``~/
 or point, which was most of the node's own cost.
 """
 
-from collections import Counter
+from collections import Counter, deque
 import logging
 import math
 import os
@@ -78,6 +78,10 @@ NS_PER_S = 1_000_000_000
 POLL_PERIOD_S = 0.01
 #: Period [s] of the empty steps that age the tracks once no input set arrives.
 IDLE_STEP_S = 0.1
+#: Tracks coast at least this many set periods (median of the recent set stamp steps), beyond
+#: fusion.max_coast_s when sets come slower: an overloaded rig's inference grid (pose2d
+#: inference_rate_hz auto) may give a set every 1-3 s, and its people must keep their tracks.
+COAST_SET_PERIODS = 2.5
 
 
 def steady_ns() -> int:
@@ -174,6 +178,7 @@ class FusionNode(Node):
         self._slop_note_logged = False
         self._last_set_node_ns: Optional[int] = None   # node clock when the last set came
         self._last_set_anchor_ns = 0                     # stamp of the last real set
+        self._set_steps_ns: Any = deque(maxlen=9)        # recent set stamp steps (coast)
         self._drops_reported: Dict[str, int] = {}
         self._clock_seen = (self._now_ns(), steady_ns())   # node clock value, steady at change
         self.output = self._new_output()
@@ -224,7 +229,8 @@ class FusionNode(Node):
             f'{self.rig_path} (layout {self.layout.name}, world frame {self.world_frame!r}, '
             f'use_sim_time {self.get_parameter("use_sim_time").value}); sync slop '
             f'{self.sync_config.slop_s * 1e3:.1f} ms (0 = half the frame period), max_wait '
-            f'{self.sync_config.max_wait_s * 1e3:.0f} ms, min_views '
+            f'{self.sync_config.max_wait_s * 1e3:.0f} ms (adapts up to '
+            f'{self.sync_config.max_wait_cap_s * 1e3:.0f} ms), min_views '
             f'{self.sync_config.min_views}')
 
     # ------------------------------------------------------------------ parameters
@@ -597,9 +603,9 @@ class FusionNode(Node):
             # Frames captured up to (now - wait) would have arrived: the empty step stands for
             # them. Stepping only starts after max_coast_s, so a hiccup of a publisher (or a
             # replay slower than real time) does not turn its next frames late.
-            wait_ns = int(self.sync_config.max_wait_s * NS_PER_S) + \
+            wait_ns = self.sync.max_wait_ns + \
                 (self.sync.frame_period_ns or int(IDLE_STEP_S * NS_PER_S))
-            coast_ns = int(self.fusion_config.max_coast_s * NS_PER_S)
+            coast_ns = int(self.fusion.tracker.config.max_coast_s * NS_PER_S)
             if idle_ns <= max(wait_ns, coast_ns):
                 return
             if self._last_rx_any_ns is not None and steady_ns() - self._last_rx_any_ns <= coast_ns:
@@ -634,11 +640,28 @@ class FusionNode(Node):
     # ------------------------------------------------------------------ fusion and output
     def _process(self, synced: SyncedSet) -> None:
         self._last_set_node_ns = self._now_ns()
+        self._adapt_coast(synced.stamp_ns)
         self._last_set_anchor_ns = synced.stamp_ns
         if self._step(synced.messages, synced.stamp_ns):
             self.counts['sets'] += 1
             if synced.missing:
                 self.counts['partial_sets'] += 1
+
+    def _adapt_coast(self, stamp_ns: int) -> None:
+        """Let tracks coast COAST_SET_PERIODS set periods at least (slow sets keep tracks)."""
+        step = stamp_ns - self._last_set_anchor_ns
+        if self._last_set_anchor_ns and 0 < step < 30 * NS_PER_S:
+            self._set_steps_ns.append(step)
+        if len(self._set_steps_ns) < 3:
+            return
+        period = sorted(self._set_steps_ns)[len(self._set_steps_ns) // 2] / NS_PER_S
+        coast = max(self.fusion_config.max_coast_s, COAST_SET_PERIODS * period)
+        tracker = self.fusion.tracker.config
+        if abs(coast - tracker.max_coast_s) > 0.05 * tracker.max_coast_s:
+            self.get_logger().info(
+                f'tracks coast {coast:.2f} s (sets every {period:.2f} s; fusion.max_coast_s '
+                f'{self.fusion_config.max_coast_s:g} s)')
+            tracker.max_coast_s = coast
 
     def _step(self, views: Dict[str, Any], stamp_ns: int, idle: bool = False) -> bool:
         """Run ``Fusion.step`` and publish; return False when the core failed (counted)."""
@@ -791,6 +814,8 @@ class FusionNode(Node):
                       'pivots dropped (too few views)': s.pivots_dropped,
                       'pending messages': s.pending(), 'held outlier messages': s.held_outliers,
                       'slop (ms)': s.slop_ns / 1e6,
+                      'max_wait in use (ms)': s.max_wait_ns / 1e6,
+                      'arrival spread p95 (ms)': s.spread_p95_s * 1e3,
                       'frame period (ms)': (s.frame_period_ns or math.nan) / 1e6,
                       'resets': self.counts['resets'],
                       'forward jumps (no reset)': s.forward_jumps,

@@ -33,12 +33,14 @@ lifecycle node: the model loads in ``on_configure``, the subscription exists whi
 ``autostart`` (default true) configures and activates it at start-up.
 """
 
+from collections import deque
 import math
 import os
+import statistics
 import struct
 import threading
 import time
-from typing import Any, List, Optional, Tuple, Union
+from typing import Any, Deque, List, Optional, Tuple, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
 from mv3dpose_ros.core.skeleton import get_layout
@@ -79,6 +81,145 @@ def header_stamp_ns(msg: Any) -> Optional[int]:
         sec, nanosec = _STAMP[buf[1] == 1].unpack_from(buf, 4)
         return sec * NS_PER_S + nanosec
     return stamp_to_ns(msg.header.stamp)
+
+
+#: Grid rates ``inference_rate_hz`` auto chooses from: 40 / 2^k Hz (periods 25 ms x 2^k). Every
+#: window boundary of a slower rate is one of each faster rate, so the first image of a slower
+#: window is also the first of a faster one: cameras whose nodes settle on different rates still
+#: infer common instants (those of the slowest).
+AUTO_RATES_HZ = tuple(40.0 / 2 ** k for k in range(10))      # 40 Hz .. 0.078 Hz
+#: Auto mode: a rate is kept while one image takes at most AUTO_DOWN of its period, a rate is
+#: chosen at AUTO_MARGIN of what the node can infer, the next faster one (or every image) is
+#: taken only below AUTO_UP: the band in between is the hysteresis.
+AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
+#: Auto mode: processing times kept (median), needed since the last change, and the least time
+#: a rate is kept [s].
+AUTO_WINDOW, AUTO_MIN_SAMPLES, AUTO_DWELL_S = 9, 3, 3.0
+
+
+def parse_inference_rate(value: Any) -> float:
+    """
+    Return the ``inference_rate_hz`` parameter as a number: < 0 auto, 0 every image, > 0 Hz.
+
+    Accepts an int, a float or the string ``auto`` (or a number as a string); raises
+    ``ValueError`` naming the parameter otherwise.
+    """
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if text == 'auto':
+            return -1.0
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"inference_rate_hz must be 'auto', -1 (auto), 0 (every image) or "
+                             f'a rate in Hz, got {value!r}') from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f'inference_rate_hz must be a number or auto, got {value!r}')
+    rate = float(value)
+    if not math.isfinite(rate) or rate > 1000.0:
+        raise ValueError(f'inference_rate_hz must be auto (< 0), 0 or a rate up to 1000 Hz, '
+                         f'got {value!r}')
+    return -1.0 if rate < 0 else rate
+
+
+def grid_period_ns(rate_hz: float) -> int:
+    """Return the stamp window of a grid rate in integer nanoseconds."""
+    return int(round(NS_PER_S / rate_hz))
+
+
+def on_new_window(stamp_ns: int, last_ns: Optional[int], period_ns: int) -> bool:
+    """
+    Tell whether ``stamp_ns`` opens a new grid window after the image that opened ``last_ns``.
+
+    Windows are ``stamp // period``; an image in the same window as the last one taken, or
+    slightly (< 1 s) before it (reordering), does not; a jump back of 1 s or more (a replay
+    starting again) does.
+    """
+    if last_ns is None:
+        return True
+    window, last = stamp_ns // period_ns, last_ns // period_ns
+    return not (window == last or 0 < (last - window) * period_ns < NS_PER_S)
+
+
+class AutoInferenceRate:
+    """
+    ``inference_rate_hz`` auto: the grid rate one camera's node can sustain (0: every image).
+
+    Fed with the header stamps of arriving images (the camera rate) and the time the node
+    spends on each image it processes, ``update`` returns a new rate when it should change:
+    every image while the node keeps up; once the camera outpaces it, the fastest rate of
+    ``AUTO_RATES_HZ`` at ``AUTO_MARGIN`` of what it can infer; one step faster (or every image)
+    only when that stays below ``AUTO_UP``; slower as soon as the rate needs more than
+    ``AUTO_DOWN``. A rate is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at
+    least, so the choice follows the load but does not flap.
+    """
+
+    def __init__(self) -> None:
+        self.rate_hz = 0.0                    # current grid rate; 0: every image
+        self._proc_s: Deque[float] = deque(maxlen=AUTO_WINDOW)
+        self._steps_ns: Deque[int] = deque(maxlen=16)
+        self._last_stamp: Optional[int] = None
+        self._changed_s: Optional[float] = None
+        self.reason = 'every image (no measurement yet)'
+
+    def add_stamp(self, stamp_ns: int) -> None:
+        """Record the header stamp of an arriving image (before any grid or mailbox)."""
+        last, self._last_stamp = self._last_stamp, stamp_ns
+        if last is not None and 0 < stamp_ns - last < 10 * NS_PER_S:
+            self._steps_ns.append(stamp_ns - last)
+
+    def add_processing(self, seconds: float) -> None:
+        """Record the time the node spent on one processed image."""
+        if math.isfinite(seconds) and seconds > 0:
+            self._proc_s.append(seconds)
+
+    @property
+    def input_hz(self) -> float:
+        """Camera rate from the median stamp step (NaN until 4 steps are known)."""
+        if len(self._steps_ns) < 4:
+            return math.nan
+        return NS_PER_S / statistics.median(self._steps_ns)
+
+    @property
+    def processing_s(self) -> float:
+        """Median time per processed image since the last change (NaN when unknown)."""
+        return statistics.median(self._proc_s) if self._proc_s else math.nan
+
+    def update(self, now_s: float) -> Optional[float]:
+        """Return the new grid rate when it changes now (0: every image), else None."""
+        if self._changed_s is None:
+            self._changed_s = now_s
+        if len(self._proc_s) < AUTO_MIN_SAMPLES or now_s - self._changed_s < AUTO_DWELL_S:
+            return None
+        fps = self.input_hz
+        if not math.isfinite(fps):
+            return None
+        proc = self.processing_s
+        cap = 1.0 / proc
+        rate = self.rate_hz
+        new = rate
+        if rate == 0.0:
+            if fps * proc > AUTO_DOWN:
+                new = self.fastest(AUTO_MARGIN * cap)
+        elif rate * proc > AUTO_DOWN:
+            new = self.fastest(AUTO_MARGIN * cap)
+        elif fps * proc <= AUTO_UP:
+            new = 0.0
+        elif 2 * rate * proc <= AUTO_UP and 2 * rate < fps:
+            new = 2 * rate
+        if new == rate:
+            return None
+        self.rate_hz = new
+        self._changed_s = now_s
+        self._proc_s.clear()
+        self.reason = (f'images at {fps:.2f} Hz, {proc * 1e3:.0f} ms per image (at most '
+                       f'{cap:.2f} Hz)')
+        return new
+
+    @staticmethod
+    def fastest(limit_hz: float) -> float:
+        """Return the fastest rate of ``AUTO_RATES_HZ`` up to ``limit_hz`` (else the slowest)."""
+        return next((r for r in AUTO_RATES_HZ if r <= limit_hz), AUTO_RATES_HZ[-1])
 
 
 #: Per-image stages timed in /diagnostics (medians): capture stamp -> receipt, receipt ->
@@ -129,11 +270,13 @@ PARAMETERS = {
     'diagnostics_period_s': (1.0, '/diagnostics publish period [s]', False),
     'min_rate_hz': (0.0, '[DYNAMIC] output rate below which diagnostics WARN (0 = off)', True),
     'no_input_timeout_s': (5.0, '[DYNAMIC] WARN when no image arrived for this long [s]', True),
-    'inference_rate_hz': (0.0, '[DYNAMIC] 0: infer the newest image whenever the model is free; '
-                               '> 0: infer only the first image of each 1/rate window of the '
-                               'header stamps, so every camera of a synchronised rig infers the '
-                               'same instants and fusion gets complete sets under overload '
-                               '(set it at or below the rate one camera can infer)', True),
+    'inference_rate_hz': (-1.0, '[DYNAMIC] -1 or auto: every image while the node keeps up; '
+                                'when images come faster than it infers, a grid rate of '
+                                '40/2^k Hz it can sustain (measured), so the cameras of a rig '
+                                'infer common instants; 0: infer the newest image whenever '
+                                'the model is free; > 0: infer only the first image of each '
+                                '1/rate window of the header stamps (every camera of a '
+                                'synchronised rig infers the same instants)', True),
     'autostart': (True, 'configure and activate at start-up (false: wait for lifecycle '
                         'transitions)', False),
 }
@@ -146,7 +289,8 @@ class Pose2DNode(LifecycleNode):
         super().__init__(node_name, **kwargs)
         for name, (default, text, dynamic) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(
-                description=text, read_only=not dynamic))
+                description=text, read_only=not dynamic,
+                dynamic_typing=name == 'inference_rate_hz'))   # 1, 1.0 and auto all work
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.layout = get_layout('coco17')
         self.estimator: Optional[PoseEstimator] = None
@@ -161,7 +305,14 @@ class Pose2DNode(LifecycleNode):
         self._pending: Union[Image, bytes, None] = None
         self._pending_ns = 0                 # steady clock when the pending image arrived
         self._fit_pending = False            # model.input_size auto: choose at the first image
-        self._rate_hz = float(self.get_parameter('inference_rate_hz').value)
+        self._rate_hz = 0.0                  # grid rate in use (0: every image)
+        self._auto: Optional[AutoInferenceRate] = None
+        self._grid_stamp: Optional[int] = None   # stamp of the image that opened the window
+        try:
+            self._set_rate(parse_inference_rate(self.get_parameter('inference_rate_hz').value))
+            self._rate_error = ''
+        except ValueError as exc:
+            self._rate_error = str(exc)
         self._stop = False
         self._stats_lock = threading.Lock()
         self._reset_stats()
@@ -178,7 +329,6 @@ class Pose2DNode(LifecycleNode):
 
     def _reset_stats(self) -> None:
         self.received = self.processed = self.dropped = self.skipped = 0
-        self._last_window: Optional[int] = None
         self.rejected_encoding = self.rejected_stamp = self.failed = 0
         self.people_last = 0
         self._in_freq, self._out_freq = FrequencyStats(), FrequencyStats()
@@ -200,12 +350,15 @@ class Pose2DNode(LifecycleNode):
                 return SetParametersResult(successful=False, reason=f'{p.name} must be in [0, 1]')
             if p.name == 'max_people' and int(p.value) < 1:
                 return SetParametersResult(successful=False, reason='max_people must be >= 1')
-            if p.name == 'inference_rate_hz' and not 0.0 <= float(p.value) <= 1000.0:
-                return SetParametersResult(successful=False,
-                                           reason='inference_rate_hz must be in [0, 1000]')
+            if p.name == 'inference_rate_hz':
+                try:
+                    parse_inference_rate(p.value)
+                except ValueError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
         for p in params:
             if p.name == 'inference_rate_hz':
-                self._rate_hz = float(p.value)
+                with self._cv:
+                    self._set_rate(parse_inference_rate(p.value))
         if est is not None:
             for p in params:
                 if p.name == 'score_threshold':
@@ -238,6 +391,16 @@ class Pose2DNode(LifecycleNode):
             f'weights licence: {est.licence}')
         return est
 
+    def _set_rate(self, value: float) -> None:
+        """Apply a parsed ``inference_rate_hz``: auto (< 0), every image (0) or fixed."""
+        self._auto = AutoInferenceRate() if value < 0 else None
+        self._rate_hz = max(0.0, value)
+
+    @property
+    def inference_rate_hz(self) -> float:
+        """Grid rate in use now (0: every image; in auto mode the one chosen)."""
+        return self._rate_hz
+
     def _registered_path(self, size: Optional[Tuple[int, int]]) -> str:
         return resolve_model_path(self._param('model.name'), size_tag(size) if size else None,
                                   self._param('model.cache_dir') or None,
@@ -255,6 +418,10 @@ class Pose2DNode(LifecycleNode):
         """Load the model and create the publishers."""
         ns_last = self.get_namespace().strip('/').split('/')[-1]
         self.camera_id = self._param('camera_id') or ns_last or self.get_name()
+        if self._rate_error:
+            self.error = self._rate_error
+            self.get_logger().error(self.error)
+            return TransitionCallbackReturn.FAILURE
         size = str(self._param('model.input_size')).strip().lower()
         self._fit_pending = False
         try:
@@ -360,17 +527,13 @@ class Pose2DNode(LifecycleNode):
         super().destroy_node()
 
     # -- data path ------------------------------------------------------------------------------
-    def _on_grid(self, msg: Union[Image, bytes]) -> bool:
+    def _on_grid(self, stamp: Optional[int]) -> bool:
         """Tell whether an image opens a new inference_rate_hz window of header stamps."""
-        stamp = header_stamp_ns(msg)
         if stamp is None or stamp <= 0:
             return True                          # rejected later, with the reason
-        period = int(NS_PER_S / self._rate_hz)
-        window = stamp // period
-        last = self._last_window
-        if last is not None and (window == last or 0 < (last - window) * period < NS_PER_S):
+        if not on_new_window(stamp, self._grid_stamp, grid_period_ns(self._rate_hz)):
             return False                          # same window, or slightly out of order
-        self._last_window = window
+        self._grid_stamp = stamp
         return True
 
     def _on_image(self, msg: Union[Image, bytes]) -> None:
@@ -378,7 +541,10 @@ class Pose2DNode(LifecycleNode):
         now = self.get_clock().now().nanoseconds
         arrived = time.time_ns()
         with self._cv:
-            if self._rate_hz > 0 and not self._on_grid(msg):
+            stamp = header_stamp_ns(msg)
+            if self._auto is not None and stamp is not None and stamp > 0:
+                self._auto.add_stamp(stamp)
+            if self._rate_hz > 0 and not self._on_grid(stamp):
                 self.skipped += 1
                 self.received += 1
                 self._last_input_ns = now
@@ -401,12 +567,32 @@ class Pose2DNode(LifecycleNode):
                     return
                 msg, self._pending = self._pending, None
                 arrived = self._pending_ns
+            t0 = time.monotonic()
             try:
-                self.process(msg, arrived)
+                out = self.process(msg, arrived)
             except Exception as exc:  # noqa: B902 - one bad frame must never stop the node
+                out = None
                 self.failed += 1
                 self._rl('failed', f'camera {self.camera_id}: inference failed: {exc!r}',
                          self.get_clock().now().nanoseconds)
+            if out is not None:
+                self._adapt_rate(time.monotonic() - t0)
+
+    def _adapt_rate(self, seconds: float) -> None:
+        """Auto mode: record one image's processing time; apply and log a new grid rate."""
+        with self._cv:
+            auto = self._auto
+            if auto is None:
+                return
+            auto.add_processing(seconds)
+            new = auto.update(time.monotonic())
+            if new is None:
+                return
+            old, self._rate_hz = self._rate_hz, new
+        what = f'{new:g} Hz' if new else 'every image'
+        self.get_logger().info(
+            f'camera {self.camera_id}: inference_rate_hz auto: {what} (was '
+            f'{f"{old:g} Hz" if old else "every image"}): {auto.reason}')
 
     def _fit_to(self, image_hw: Tuple[int, int]) -> None:
         """At the first image: switch to the fetched input size that fits its aspect best."""
@@ -528,6 +714,9 @@ class Pose2DNode(LifecycleNode):
                   'Images processed': self.processed,
                   'Dropped before inference (newer image arrived)': self.dropped,
                   'Skipped (inference_rate_hz grid)': self.skipped,
+                  'Inference rate mode': ('auto' if self._auto is not None else
+                                          'fixed' if self._rate_hz else 'every image'),
+                  'Inference rate (Hz)': self._rate_hz or 'every image',
                   'Rejected (encoding/size)': self.rejected_encoding,
                   'Rejected (zero stamp)': self.rejected_stamp, 'Inference failures': self.failed,
                   'People in last image': self.people_last}
