@@ -168,6 +168,8 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
         assert 'Inference latency median (ms)' in keys
         assert 'Dropped before inference (newer image arrived)' in keys
         assert keys['Execution provider'] == 'CPUExecutionProvider'
+        assert keys['Inference rate mode'] == 'auto'            # the default
+        assert keys['Inference rate (Hz)'] == 'every image'     # it keeps up here
         for stage in ('transport', 'wait', 'decode', 'pre', 'inference', 'post', 'publish'):
             assert float(keys[f'Stage {stage} median (ms)']) >= 0.0, stage
 
