@@ -199,7 +199,7 @@ class Fusion:
         self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
         self._strong_views = min(3, num_c)
         self._noise_views = min(3, num_c)         # 2-view residuals say little about noise
-        self._noise_est, self._noise_sets = cfg.measurement_noise_norm, 0
+        self._noise_est, self._noise_sets, self._noise_calls = cfg.measurement_noise_norm, 0, 0
         self._confirm_joints = cfg.confirm_at_birth_ratio * lay.num_joints
         self._last_stamp: Optional[float] = None
         self._warned: Set[str] = set()
@@ -274,14 +274,19 @@ class Fusion:
 
     def _estimate_noise(self, tri: Triangulation) -> None:
         """Fold this set's median reprojection error into the running 2D noise estimate."""
+        self._noise_calls += 1
+        if self.config.noise_gain <= 0 or (self._noise_sets >= 100 and self._noise_calls % 10):
+            return                       # settled: every 10th set is enough (deterministic)
         n = tri.num_views
-        ok = (n >= self._noise_views) & np.isfinite(tri.error)
-        if self.config.noise_gain <= 0 or ok.sum() < 5:
+        ok = (n >= self._noise_views) & (tri.error < np.inf)        # finite (NaN: False)
+        count = int(np.count_nonzero(ok))
+        if count < 5:
             return
         # DLT from n views leaves 2n - 3 of 2n degrees of freedom in the residuals; the median
         # of a 2D Gaussian error's length is 1.177 sigma.
         k = n[ok]
-        sigma = float(np.median(tri.error[ok] / np.sqrt((2 * k - 3) / (2 * k)))) / 1.177
+        e = tri.error[ok] * np.sqrt(2 * k / (2 * k - 3))
+        sigma = float(np.partition(e, count // 2)[count // 2]) / 1.177
         self._noise_sets += 1
         if self._noise_sets == 1:
             self._noise_est = sigma
@@ -297,12 +302,13 @@ class Fusion:
         """
         if not len(tri.joints):
             return np.zeros(tri.joints.shape[:2])
-        pts = np.concatenate((tri.joints, np.ones(tri.joints.shape[:2] + (1,))), axis=-1)
-        depth = pts @ self._depth_rows.T                                    # [K, J, C]
-        used = np.moveaxis(tri.used, 0, -1)                                 # [K, J, C]
+        # depth of each candidate's centre in each camera: the joints of a person are at
+        # about the same distance from a camera, compared with the distance itself
+        centre = centroid(tri.joints)                                       # [K, 3]
+        depth = centre @ self._depth_rows[:, :3].T + self._depth_rows[:, 3]  # [K, C]
         n = tri.num_views
         with np.errstate(invalid='ignore', divide='ignore'):
-            mean_depth = np.where(used, depth, 0.0).sum(axis=-1) / n
+            mean_depth = (tri.used * depth.T[:, :, None]).sum(axis=0) / n   # [K, J]
             var = self.noise_norm ** 2 * mean_depth * mean_depth / n
         return np.where(np.isfinite(tri.joints[..., 0]), np.maximum(var, _MIN_VARIANCE), np.nan)
 
