@@ -80,6 +80,8 @@ SPREAD_WINDOW, SPREAD_MIN = 128, 8
 SPREAD_FACTOR = 1.3
 #: Decided sets remembered to measure how late their late messages came.
 DECIDED_WINDOW = 64
+#: Accepted messages whose capture -> arrival delay sets the stream time (the shortest).
+OFFSET_WINDOW = 64
 
 
 @dataclass
@@ -246,6 +248,7 @@ class StreamSynchronizer:
         self.last_emitted_ns: Optional[int] = None   # pivot of the last emitted set
         self._consumed_ns: Optional[int] = None      # stamps <= this are decided (emit/drop)
         self._ref: Optional[Tuple[int, int]] = None  # newest accepted stamp, its arrival
+        self._offsets: Deque[int] = deque(maxlen=OFFSET_WINDOW)   # arrival - stamp, recent
         self._first_arrival_ns: Optional[int] = None
         self._last_accepted_arrival: Dict[str, Optional[int]] = dict.fromkeys(ids)
         self.slop_ns = self._slop_cfg or int(INITIAL_SLOP_S * NS_PER_S)
@@ -330,6 +333,7 @@ class StreamSynchronizer:
         self.last_emitted_ns = None
         self._consumed_ns = None
         self._ref = None
+        self._offsets.clear()
         self._decided.clear()                        # stamps start again; spreads are kept
         self.resets += 1
 
@@ -356,7 +360,8 @@ class StreamSynchronizer:
         """
         Return how far ``stamp_ns`` is from the stream time if beyond ``jump_s``, else None.
 
-        Ahead: beyond the newest accepted stamp advanced by the arrival time since. Behind:
+        Ahead: beyond the stream time, the later of the newest accepted stamp advanced by the
+        arrival time since and the arrival clock less the shortest recent delay. Behind:
         before it and also before the camera's own newest stamp, by ``jump_s`` each; a camera
         that merely lags (its own stamps still advance, e.g. its input queue is behind on an
         overloaded host, or it has sent nothing yet) is no outlier: its messages are late, not a
@@ -365,7 +370,11 @@ class StreamSynchronizer:
         if self._ref is None:
             return None
         ref_stamp, ref_arrival = self._ref
-        ahead = stamp_ns - (ref_stamp + max(0, now - ref_arrival))
+        # Stream time: the arrival clock less the shortest recent capture -> arrival delay
+        # (at least the newest stamp advanced by the time since it arrived), so detections
+        # whose delay varies by seconds (bursts of inference on a loaded host) are not ahead.
+        lead = min(self._offsets) if self._offsets else ref_arrival - ref_stamp
+        ahead = stamp_ns - max(ref_stamp + max(0, now - ref_arrival), now - lead)
         if ahead > self._jump:
             return ahead
         own = self.stats[cam].last_seen_ns
@@ -417,6 +426,7 @@ class StreamSynchronizer:
                                'step back); synchroniser reset')
         else:
             self._ref = None
+            self._offsets.clear()
             self.forward_jumps += 1
             result = AddResult(reason=f'{what} (pause or input dropped under load); '
                                'continuing from the new stamps')
@@ -450,6 +460,7 @@ class StreamSynchronizer:
                 f'dropped; a camera this late needs a longer sync.max_wait_s)'))
         if self._ref is None or stamp_ns > self._ref[0]:
             self._ref = (stamp_ns, entry[2])
+        self._offsets.append(entry[2] - stamp_ns)
         insort(self._buffers[cam], entry, key=lambda e: e[0])
         return AddResult(sets=self._process(now))
 
@@ -506,9 +517,11 @@ class StreamSynchronizer:
                     not period or latest - period > hi or latest - period + tol < pivot):
                 continue        # it sent a later frame, and the one before that is not ours
             if now - last_arrival > self.max_wait_ns + period and (
-                    latest is None or latest < pivot - self.max_wait_ns):
+                    latest is None or latest < pivot - max(self.max_wait_ns, period * 3 // 2)):
                 continue     # silent: nothing for a while, and its last frame is long past
-                #              (a node stalled by the CPU sees every camera late, not silent)
+                #              (a node stalled by the CPU sees every camera late, not silent;
+                #              at a slow set rate whose delay varies, the camera's previous
+                #              frame is one period back: it is not silent before it skips one)
             if period and latest is not None and latest < pivot and \
                     latest + period - tol > hi:
                 continue                             # its next frame falls after the window
