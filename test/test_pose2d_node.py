@@ -462,13 +462,16 @@ def test_auto_rate_choice_follows_load_with_hysteresis():
     auto = AutoInferenceRate()
     t = 0.0
 
-    def run(seconds_per_image, fps, n, step_s=1.0):
+    def run(seconds_per_image, fps, n, step_s=1.0, paced=False):
         nonlocal t
         changes = []
         for _ in range(n):
             for _ in range(int(fps * step_s)):
                 auto.add_stamp(int(1000 * NS + t * NS))
                 t += 1.0 / fps
+            if not paced and auto.rate_hz == 0.0:
+                for _ in range(max(0, int(fps * step_s) - int(step_s / seconds_per_image))):
+                    auto.add_replaced()              # what the mailbox replaces meanwhile
             auto.add_processing(seconds_per_image)
             new = auto.update(t)
             if new is not None:
@@ -486,6 +489,10 @@ def test_auto_rate_choice_follows_load_with_hysteresis():
     assert run(0.2, 10.0, 10) == [1.25, 2.5]        # faster again, one step per dwell
     assert run(0.02, 10.0, 10) == [0.0]             # keeps up: every image
     assert 'images at 10.00 Hz' in auto.reason
+    # slow, but a player waits for each output (nothing replaced): every image
+    auto = AutoInferenceRate()
+    assert run(2.0, 1.0, 10, paced=True) == [] and auto.rate_hz == 0.0
+    assert run(2.0, 1.0, 10) == [0.3125]            # the same, free-running: a grid
 
 
 def test_inference_rate_parameter_accepts_auto_int_and_float(ros_context):

@@ -145,9 +145,11 @@ class AutoInferenceRate:
     """
     ``inference_rate_hz`` auto: the grid rate one camera's node can sustain (0: every image).
 
-    Fed with the header stamps of arriving images (the camera rate) and the time the node
-    spends on each image it processes, ``update`` returns a new rate when it should change:
-    every image while the node keeps up; once the camera outpaces it, the fastest rate of
+    Fed with the header stamps of arriving images (the camera rate), the images replaced in
+    the mailbox before inference and the time the node spends on each image it processes,
+    ``update`` returns a new rate when it should change: every image while the node keeps up
+    (also when it is slow but nothing is replaced: a player that waits for the output); once
+    the camera outpaces it (images replaced), the fastest rate of
     ``AUTO_RATES_HZ`` at ``AUTO_MARGIN`` of what it can infer; one step faster (or every image)
     only when that stays below ``AUTO_UP``; slower as soon as the rate needs more than
     ``AUTO_DOWN``. A rate is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at
@@ -159,6 +161,7 @@ class AutoInferenceRate:
         self._proc_s: Deque[float] = deque(maxlen=AUTO_WINDOW)
         self._steps_ns: Deque[int] = deque(maxlen=16)
         self._last_stamp: Optional[int] = None
+        self._replaced = 0                    # images replaced before inference since a change
         self._changed_s: Optional[float] = None
         self.reason = 'every image (no measurement yet)'
 
@@ -167,6 +170,10 @@ class AutoInferenceRate:
         last, self._last_stamp = self._last_stamp, stamp_ns
         if last is not None and 0 < stamp_ns - last < 10 * NS_PER_S:
             self._steps_ns.append(stamp_ns - last)
+
+    def add_replaced(self) -> None:
+        """Record an image replaced in the mailbox by a newer one before inference."""
+        self._replaced += 1
 
     def add_processing(self, seconds: float) -> None:
         """Record the time the node spent on one processed image."""
@@ -199,7 +206,7 @@ class AutoInferenceRate:
         rate = self.rate_hz
         new = rate
         if rate == 0.0:
-            if fps * proc > AUTO_DOWN:
+            if fps * proc > AUTO_DOWN and self._replaced >= AUTO_MIN_SAMPLES:
                 new = self.fastest(AUTO_MARGIN * cap)
         elif rate * proc > AUTO_DOWN:
             new = self.fastest(AUTO_MARGIN * cap)
@@ -212,6 +219,7 @@ class AutoInferenceRate:
         self.rate_hz = new
         self._changed_s = now_s
         self._proc_s.clear()
+        self._replaced = 0
         self.reason = (f'images at {fps:.2f} Hz, {proc * 1e3:.0f} ms per image (at most '
                        f'{cap:.2f} Hz)')
         return new
@@ -552,6 +560,8 @@ class Pose2DNode(LifecycleNode):
                 return
             if self._pending is not None:
                 self.dropped += 1
+                if self._auto is not None:
+                    self._auto.add_replaced()
             self._pending, self._pending_ns = msg, arrived
             self.received += 1
             self._last_input_ns = now
