@@ -453,7 +453,7 @@ def test_wait_adapts_to_a_camera_whose_detections_come_seconds_later():
     assert all(s.missing == ('cam3',) for s in out) and fixed.stats['cam3'].late >= 19
     sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
     out = _lagging_rig(sync, 20, 1200 * MS)
-    # The first sets measure the spread (8 samples, the late messages included); from then on
+    # The first sets measure the spread (4 samples, the late messages included); from then on
     # every set waits for cam3.
     assert sync.stats['cam3'].late <= 3 and sync.stats['cam3'].used >= 17
     assert all(s.complete for s in out if s.stamp_ns >= T0 + 3 * S)

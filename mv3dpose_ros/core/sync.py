@@ -75,7 +75,7 @@ PERIOD_MIN_STEPS = 4
 #: Slop used while no camera's period is known yet (half a 60 fps period).
 INITIAL_SLOP_S = 0.008
 #: Arrival spreads kept for the adaptive wait, and needed before it adapts.
-SPREAD_WINDOW, SPREAD_MIN = 128, 8
+SPREAD_WINDOW, SPREAD_MIN = 128, 4
 #: The adaptive wait is this factor times the p95 of the recent arrival spreads.
 SPREAD_FACTOR = 1.3
 #: Decided sets remembered to measure how late their late messages came.
@@ -516,12 +516,14 @@ class StreamSynchronizer:
             if latest is not None and latest > hi and (
                     not period or latest - period > hi or latest - period + tol < pivot):
                 continue        # it sent a later frame, and the one before that is not ours
-            if now - last_arrival > self.max_wait_ns + period and (
-                    latest is None or latest < pivot - max(self.max_wait_ns, period * 3 // 2)):
+            if now - last_arrival > self.max_wait_ns + period and (latest is None or (
+                    period and latest < pivot - max(self.max_wait_ns, period * 3 // 2))):
                 continue     # silent: nothing for a while, and its last frame is long past
                 #              (a node stalled by the CPU sees every camera late, not silent;
                 #              at a slow set rate whose delay varies, the camera's previous
-                #              frame is one period back: it is not silent before it skips one)
+                #              frame is one period back: it is not silent before it skips one;
+                #              before its period is known, e.g. the first sets of a replay
+                #              paced by slow inference, it is waited for)
             if period and latest is not None and latest < pivot and \
                     latest + period - tol > hi:
                 continue                             # its next frame falls after the window
