@@ -431,6 +431,10 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
         params = _write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': os.path.abspath(calibration),
             'camera_ids': cams, 'layout': layout, 'publish_tentative': True,
+            # The player waits for every node after each time point, so a set may wait for
+            # its slowest camera as long as the adaptive wait could grow (the first
+            # inferences warm the model up before any spread is measured).
+            'sync': {'max_wait_s': 2.0},
             'input_topic': input_topic_pattern(cams)}})
         pipeline.start('fusion_node', _fusion_cmd(params))
         pipeline.start('recorder', _recorder_cmd(

@@ -101,6 +101,10 @@ class SyncConfig:
     jump_confirm: int = 3            # consecutive outliers per camera, on >= 2 cameras, that
     #                                  make a sustained jump (reset; e.g. a bag loop)
     stats_window: int = 100          # used messages kept per camera for offset / jitter
+    stream_ahead_check: bool = True  # judge stamps ahead of the stream time on the arrival
+    #                                  clock; off under sim time, where a paced or fast replay
+    #                                  does not advance stamps at the arrival clock's rate (the
+    #                                  node then compares stamps with /clock instead)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the field when a value cannot work."""
@@ -375,7 +379,7 @@ class StreamSynchronizer:
         # whose delay varies by seconds (bursts of inference on a loaded host) are not ahead.
         lead = min(self._offsets) if self._offsets else ref_arrival - ref_stamp
         ahead = stamp_ns - max(ref_stamp + max(0, now - ref_arrival), now - lead)
-        if ahead > self._jump:
+        if ahead > self._jump and self.config.stream_ahead_check:
             return ahead
         own = self.stats[cam].last_seen_ns
         # A camera with no accepted stamp yet has no timeline to jump from: one whose first

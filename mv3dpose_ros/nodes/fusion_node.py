@@ -74,6 +74,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 NS_PER_S = 1_000_000_000
+#: Longest stretch [ns] empty steps may cover after the last set (tracks are long deleted by
+#: then; a node clock that jumped further must not produce absurd stamps).
+MAX_IDLE_SPAN_NS = 3600 * NS_PER_S
 #: Period [s] of the steady-clock timer that lets sets whose wait ran out go (core.sync.poll).
 POLL_PERIOD_S = 0.01
 #: Period [s] of the empty steps that age the tracks once no input set arrives.
@@ -346,6 +349,9 @@ class FusionNode(Node):
         try:
             self.sync_config = P.build_dataclass(self, SyncConfig, 'sync')
             self.sync_config.validate()
+            if self.get_parameter('use_sim_time').value:
+                # A replay's stamps follow /clock, not the arrival clock: judge them there.
+                self.sync_config.stream_ahead_check = False
             self.fusion_config = P.build_dataclass(self, FusionConfig, 'fusion')
             self.fusion_config.validate()
         except (TypeError, ValueError) as exc:
@@ -359,6 +365,11 @@ class FusionNode(Node):
             raise ConfigError(f'limits.max_persons ({self.max_persons}) must be >= 1 and '
                               f'limits.max_message_bytes ({self.max_message_bytes}) >= 64')
         self.max_future_ns = int(float(v('input_max_future_s')) * NS_PER_S)
+        if self.get_parameter('use_sim_time').value:
+            # The player publishes /clock with the messages: a stamp further ahead of it than
+            # sync.jump_s is an outlier, as the synchroniser judges it on a live clock.
+            self.max_future_ns = min(self.max_future_ns,
+                                     int(self.sync_config.jump_s * NS_PER_S))
         self.smoothed_lag_frames = int(v('smoothed_lag_frames'))
         if self.smoothed_lag_frames < 0:
             raise ConfigError(f'smoothed_lag_frames must be >= 0, got {self.smoothed_lag_frames}')
@@ -599,7 +610,10 @@ class FusionNode(Node):
                     self._last_set_ns is None or self._last_set_node_ns is None or \
                     self.sync.pending():
                 return
-            idle_ns = self._now_ns() - self._last_set_node_ns
+            now_ns = self._now_ns()
+            if now_ns <= 0 or self._last_set_node_ns <= 0:
+                return     # sim time before the first /clock: no elapsed time to judge
+            idle_ns = now_ns - self._last_set_node_ns
             # Frames captured up to (now - wait) would have arrived: the empty step stands for
             # them. Stepping only starts after max_coast_s, so a hiccup of a publisher (or a
             # replay slower than real time) does not turn its next frames late.
@@ -611,8 +625,8 @@ class FusionNode(Node):
             if self._last_rx_any_ns is not None and steady_ns() - self._last_rx_any_ns <= coast_ns:
                 return     # inputs still arrive (dropped, e.g. under a stalled /clock): no gap
             stamp_ns = self._last_set_anchor_ns + idle_ns - wait_ns
-            if stamp_ns <= self._last_set_ns:
-                return
+            if stamp_ns <= self._last_set_ns or stamp_ns > self._last_set_ns + MAX_IDLE_SPAN_NS:
+                return     # nothing to age, or a node clock that jumped far ahead
             self.sync.decide_through(stamp_ns)
             self.counts['idle_steps'] += 1
             self._step({}, stamp_ns, idle=True)
