@@ -41,7 +41,7 @@ import sys
 import tempfile
 import threading
 import time
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEMO = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo')
@@ -116,6 +116,21 @@ class Probe:
         with self.lock:
             hits = [t for _, t, c, _ in self.tracks if c >= people]
         return (min(hits) - since_ns) / NS if hits else None
+
+    def confirmed_share(self, people: int, since_ns: int, until_ns: int
+                        ) -> Tuple[int, int, Dict[Tuple[int, int], int]]:
+        """
+        Return tracks messages with >= ``people`` confirmed, all, and a histogram.
+
+        Counts the messages arriving in the window; the histogram maps (confirmed, skeletons
+        published) to how many messages had them.
+        """
+        with self.lock:
+            window = [(c, n) for _, t, c, n in self.tracks if since_ns <= t <= until_ns]
+        hist: Dict[Tuple[int, int], int] = {}
+        for key in window:
+            hist[key] = hist.get(key, 0) + 1
+        return sum(c >= people for c, _ in window), len(window), hist
 
     def cameras_answering(self) -> int:
         """Return how many cameras have published persons_2d so far."""
@@ -238,6 +253,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--cameras', type=int, default=4)
     parser.add_argument('--rate', type=float, default=10.0)
+    parser.add_argument('--hold', type=float, default=0.0,
+                        help='show each Panoptic time point this long [s] (a still scene per '
+                             'image, so tracks can persist); 0: a new one every instant')
     parser.add_argument('--duration', type=float, default=60.0)
     parser.add_argument('--warmup', type=float, default=10.0,
                         help='seconds after every camera answered before measuring')
@@ -283,8 +301,9 @@ def main() -> int:
                              *over], 'bringup'))
         for cam in cams:
             logs[cam] = os.path.join(logdir, f'publisher_{cam}.log')
+            hold = ['--hold', f'{args.hold:g}'] if args.hold else []
             procs.append(launch(publisher_command(cam, args.rate, args.compressed,
-                                                  ['--wait-for-subscribers', '1']),
+                                                  ['--wait-for-subscribers', '1', *hold]),
                                 f'publisher_{cam}'))
         deadline = time.monotonic() + 120
         while probe.cameras_answering() < len(cams) and time.monotonic() < deadline:
@@ -297,6 +316,7 @@ def main() -> int:
         time.sleep(args.warmup + args.duration + 2.0)
         t_end = time.time_ns() - 2 * NS
         first = probe.first_confirmed(args.people, t_start)
+        share = probe.confirmed_share(args.people, t_ready + int(args.warmup * NS), t_end)
     finally:
         stop(procs[1:])
         stop(procs[:1])
@@ -320,6 +340,13 @@ def main() -> int:
           f'{res["sets_with_tracks"]} sets; {res["tracks_messages"]} tracks messages in all)')
     print(f'first tracks with {args.people} confirmed people: '
           + (f'{first:.1f} s after start' if first is not None else 'never'))
+    pct = f' ({100.0 * share[0] / share[1]:.1f} %)' if share[1] else ''
+    held = (f'; each image held {args.hold:g} s' if args.hold else
+            '; the looped images change every instant (people jump between them)')
+    print(f'tracks messages with {args.people} confirmed people in the measured window: '
+          f'{share[0]} of {share[1]}{pct}{held}')
+    print('  (confirmed, published skeletons): messages  '
+          + ', '.join(f'{k}: {v}' for k, v in sorted(share[2].items())))
     print('per camera (whole run):')
     print('\n'.join(drop_table(probe, published)))
     return 0

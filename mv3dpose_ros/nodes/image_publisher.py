@@ -42,6 +42,7 @@ works too.
 """
 
 import argparse
+import math
 import os
 import struct
 import sys
@@ -91,6 +92,8 @@ PARAMETERS = {
     'max_frames': (0, 'stop after this many frames (0 = all)'),
     'wait_for_subscribers': (0, 'hold the first frame until this many subscribers match'),
     'preload': (False, 'decode every frame before starting (steady timing)'),
+    'hold_s': (0.0, 'looping grid mode: show each image of the source this long [s] (a still '
+                    'scene per image, e.g. for tracking on a few photos); 0 = one per instant'),
 }
 
 
@@ -226,6 +229,10 @@ class ImagePublisher(Node):
         self.info_pub = (self.create_publisher(CameraInfo, prefix + 'camera_info', qos)
                          if self.camera_info is not None else None)
         self.period_ns = int(round(1e9 / float(p['rate_hz'])))
+        if not (math.isfinite(float(p['hold_s'])) and float(p['hold_s']) >= 0.0):
+            raise ValueError(f"hold_s must be >= 0, got {p['hold_s']}")
+        # Looping on the grid, the image shown changes every slot (a period, or hold_s).
+        self.slot_ns = max(self.period_ns, int(round(float(p['hold_s']) * 1e9)))
         self.start_ns = int(round(float(p['start_stamp']) * 1e9)) or None
         self.stamp_now = self.start_ns is None
         self.count = self.skipped = 0
@@ -305,7 +312,7 @@ class ImagePublisher(Node):
                     f'publishing fell behind {self.params["rate_hz"]:g} Hz: {self.skipped} '
                     'frame instants skipped so far (CPU overloaded?)', throttle_duration_sec=10.0)
             synced = grid and self.params['loop'] and self.source.seekable
-            nxt = self._next_frame(due // self.period_ns if synced else None)
+            nxt = self._next_frame(due // self.slot_ns if synced else None)
             if nxt is None:
                 break
             self._publish(*nxt, due if grid else (now if self.stamp_now else
@@ -384,6 +391,8 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
     parser.add_argument('--count', type=int, dest='max_frames', help='stop after N frames')
     parser.add_argument('--wait-for-subscribers', type=int, dest='wait_for_subscribers')
     parser.add_argument('--preload', action='store_true', default=None)
+    parser.add_argument('--hold', type=float, dest='hold_s',
+                        help='with --loop on the grid: show each image this long [s]')
     args = parser.parse_args(argv)
     return [Parameter(k, value=v) for k, v in vars(args).items() if v is not None]
 
