@@ -45,7 +45,7 @@ pytestmark = [pytest.mark.ros]
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path):
+def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path, ros_context):
     feed = Pose2Sim(shared_data, frames=60)
     params = tmp_path / 'params.yaml'
     params.write_text(yaml.safe_dump({'/**/fusion_node': {'ros__parameters': {
@@ -58,8 +58,7 @@ def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path)
                              os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file',
                              str(params)], stdout=log, stderr=subprocess.STDOUT,
                             start_new_session=True)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
+    ctx = ros_context
     node = rclpy.create_node('outputs_probe', context=ctx)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
@@ -104,7 +103,6 @@ def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path)
         log.close()
         executor.shutdown()
         node.destroy_node()
-        rclpy.shutdown(context=ctx)
     assert code == 0, log_path.read_text()
 
     # ~/poses pairs with ~/tracks message for message: same header, roots in the same order.

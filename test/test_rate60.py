@@ -45,7 +45,7 @@ FPS = 60.0
 NS = 1_000_000_000
 
 
-def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path):
+def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path, ros_context):
     frames = 360
     scene = make_scene(num_cameras=4, num_people=3, num_frames=frames, fps=FPS, seed=5)
     rig = str(tmp_path / 'rig.yaml')
@@ -55,8 +55,7 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path):
                              os.path.join(ROOT, 'config', 'fusion.yaml'),
                              '-p', f'rig_config:={rig}'],
                             stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
+    ctx = ros_context
     node = rclpy.create_node('player', context=ctx)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
@@ -98,7 +97,6 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path):
         log.close()
         executor.shutdown()
         node.destroy_node()
-        rclpy.shutdown(context=ctx)
     text = open(tmp_path / 'fusion_node.log').read()
     print(f'{len(received)} track sets for {frames} published time points '
           f'({100 * len(received) / frames:.1f} %)')

@@ -346,10 +346,11 @@ class FusionNode(Node):
             raise ConfigError(f'intrinsics_source must be rig or camera_info, got '
                               f'{self.intrinsics_source!r}')
         self.camera_info_topic = v('camera_info_topic')
+        sim_time = bool(self.get_parameter('use_sim_time').value)
         try:
             self.sync_config = P.build_dataclass(self, SyncConfig, 'sync')
             self.sync_config.validate()
-            if self.get_parameter('use_sim_time').value:
+            if sim_time:
                 # A replay's stamps follow /clock, not the arrival clock: judge them there.
                 self.sync_config.stream_ahead_check = False
             self.fusion_config = P.build_dataclass(self, FusionConfig, 'fusion')
@@ -365,7 +366,7 @@ class FusionNode(Node):
             raise ConfigError(f'limits.max_persons ({self.max_persons}) must be >= 1 and '
                               f'limits.max_message_bytes ({self.max_message_bytes}) >= 64')
         self.max_future_ns = int(float(v('input_max_future_s')) * NS_PER_S)
-        if self.get_parameter('use_sim_time').value:
+        if sim_time:
             # The player publishes /clock with the messages: a stamp further ahead of it than
             # sync.jump_s is an outlier, as the synchroniser judges it on a live clock.
             self.max_future_ns = min(self.max_future_ns,
