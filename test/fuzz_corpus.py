@@ -374,7 +374,8 @@ def _bag_argvs(bag: Path, root: Path) -> List[List[str]]:
             ['render', str(bag), '-o', _out(root, '.png'), '-q']]
 
 
-def _mcap_chunks(raw: bytes) -> List[tuple]:
+def mcap_chunks(raw: bytes) -> List[tuple]:
+    """Return ``(offset, length)`` of every chunk record of MCAP bytes."""
     pos, out = 8, []
     while pos + 9 <= len(raw) and raw[pos] != 0x0F:
         length = int.from_bytes(raw[pos + 1:pos + 9], 'little')
@@ -397,7 +398,7 @@ def _bag_cases(bases, root: Path) -> List[Case]:
 
     # MCAP: flipped bits inside chunk payloads, truncations, garbage
     mcap = next(bases['mcap'].glob('*.mcap')).read_bytes()
-    chunks = _mcap_chunks(mcap)
+    chunks = mcap_chunks(mcap)
     for i in range(30):
         offset, length = chunks[rng.randrange(len(chunks))]
         pos = offset + 9 + 60 + rng.randrange(length - 60)

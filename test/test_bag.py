@@ -21,6 +21,7 @@ import sys
 import time
 
 from conftest import spin_until
+from fuzz_corpus import mcap_chunks
 from mv3dpose_ros.commands.bag import info, qos_from_rclpy, qos_to_rclpy
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, check_bag, get_typestore
 from mv3dpose_ros.io.bag import make_qos
@@ -159,14 +160,7 @@ def test_truncated_and_corrupt_bags_name_the_file(tmp_path, storage):
 
 def _chunks(mcap):
     """Return ``(offset, length)`` of every chunk record of an MCAP file."""
-    raw = mcap.read_bytes()
-    pos, out = 8, []
-    while pos + 9 <= len(raw) and raw[pos] != 0x0F:
-        length = int.from_bytes(raw[pos + 1:pos + 9], 'little')
-        if raw[pos] == 0x06:
-            out.append((pos, length))
-        pos += 9 + length
-    return out
+    return mcap_chunks(mcap.read_bytes())
 
 
 def _payload_corruptions(good, storage, count, seed):
