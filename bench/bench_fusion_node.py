@@ -42,8 +42,18 @@ rclpy's deserialiser + ``person2d_array_to_numpy``, and the outputs ``tracks_to_
 ``tracks_to_msg`` + rclpy serialisation, ``tracks_to_markers_cdr`` vs ``tracks_to_markers`` +
 serialisation (median of repeated calls, microseconds).
 
+``--real SOURCE:CAMS@HZ,...`` replays real detections instead of the synthetic scene, looped
+forwards and backwards (so motion stays continuous), converted to coco17 as pose2d publishes
+them: ``pose2sim`` (OpenPose BODY_25B of the Pose2Sim session, 4 portrait cameras, 2 people)
+or ``panoptic`` (the CMU Panoptic band1 3D ground truth of 3 people, 20 frames, through the
+simulated detector into CAMS of its HD cameras), read in place from ``../shared/data``. It
+prints the node's CPU share, sets/s and the latency medians; ``--base CHECKOUT`` runs every
+configuration also with the fusion_node of another checkout (e.g. a ``git worktree`` of an
+older commit) and prints both lines, runs interleaved.
+
 Usage: ``python bench/bench_fusion_node.py [--seconds 10] [--configs 5x4,16x6] [--rate 30]
-[--runs 2] [--markers] [--micro]``
+[--runs 2] [--markers] [--micro]``, or ``python bench/bench_fusion_node.py --real
+panoptic:4@10,panoptic:5@30 --seconds 20 [--base /tmp/old_checkout]``
 """
 
 import argparse
@@ -59,6 +69,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array
+from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim.people import WalkConfig
 from mv3dpose_ros.sim.rig import RigConfig
@@ -74,6 +85,10 @@ import yaml
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TICKS = os.sysconf('SC_CLK_TCK')
 STAMP = struct.Struct('<iI')     # header.stamp, right after the 4-byte CDR encapsulation
+DATA = os.path.join(ROOT, '..', 'shared', 'data')
+#: Panoptic HD cameras used by --real panoptic, in this order (the first 5 are bench/accuracy's).
+PANOPTIC_CAMERAS = ['00_03', '00_06', '00_12', '00_13', '00_23', '00_01', '00_09', '00_16',
+                    '00_19', '00_27']
 
 
 def cpu_seconds(pid: int) -> float:
@@ -88,6 +103,70 @@ def _scene(cams: int, people: int, frames: int, rate: float, seed: int) -> Any:
     return make_scene(num_cameras=cams, num_people=people, num_frames=frames, fps=rate,
                       seed=seed, rig=RigConfig(num_cameras=cams, radius_m=radius),
                       walk=WalkConfig(area_radius_m=radius * 0.5))
+
+
+class Feed:
+    """What the feeder publishes: cameras, per-frame 2D poses per camera, their layout."""
+
+    def __init__(self, name: str, cameras: dict, views: list, layout: str,
+                 people: int) -> None:
+        self.name, self.cameras, self.views = name, cameras, views
+        self.layout, self.people = layout, people
+
+    def frame(self, index: int) -> dict:
+        """Return the views of frame ``index``, looped forwards and backwards."""
+        n = len(self.views)
+        k = index % max(1, 2 * n - 2)
+        return self.views[k if k < n else 2 * n - 2 - k]
+
+
+def synthetic_feed(cams: int, people: int, frames: int, rate: float, seed: int = 0) -> Feed:
+    """Return the synthetic scene of ``cams`` cameras and ``people`` people as a Feed."""
+    scene = _scene(cams, people, frames, rate, seed)
+    return Feed(f'synthetic {cams} x {people}', scene.cameras, scene.views, scene.layout,
+                people)
+
+
+def real_feed(source: str, cams: int) -> Feed:
+    """Return real detections (``pose2sim`` or ``panoptic``) as a coco17 Feed of ``cams``."""
+    from mv3dpose_ros.core.calibration import load_calibration
+    from mv3dpose_ros.core.skeleton import convert_poses
+    from mv3dpose_ros.eval.sequence import load_ground_truth
+    from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
+    from mv3dpose_ros.sim.detector import detect
+    if source == 'pose2sim':
+        folder = os.path.join(DATA, 'pose2sim_multiperson')
+        cameras = load_calibration(os.path.join(ROOT, 'config', 'rigs',
+                                                'pose2sim_multiperson.yaml'))
+        if not 2 <= cams <= len(cameras):
+            raise SystemExit(f'pose2sim has {len(cameras)} cameras, asked for {cams}')
+        cameras = dict(list(cameras.items())[:cams])
+        folders, missing = match_camera_folders(os.path.join(folder, 'pose'), list(cameras))
+        if missing:
+            raise SystemExit(f'pose2sim: no detections for {missing} under {folder}')
+        raw = [views for _, views in OpenPoseSequence(folders, num_joints=25)]
+        src = 'body25b'
+    elif source == 'panoptic':
+        folder = os.path.join(DATA, 'panoptic_160906_band1')
+        names = PANOPTIC_CAMERAS[:cams]
+        if len(names) < max(2, cams):
+            raise SystemExit(f'panoptic: at most {len(PANOPTIC_CAMERAS)} cameras')
+        cameras = load_calibration(os.path.join(folder, 'calibration_160906_band1.json'),
+                                   cameras=names)
+        gt = load_ground_truth(folder, 'panoptic')
+        frames = sorted(gt.frames)
+        ids = sorted({int(i) for f in frames for i in gt.frames[f][0]})
+        poses = np.full((len(frames), len(ids), 19, 3), np.nan)
+        for k, f in enumerate(frames):
+            fid, p = gt.frames[f]
+            poses[k, [ids.index(int(i)) for i in fid]] = p
+        raw, _ = detect(cameras, poses, 'panoptic19', seed=0)
+        src = 'panoptic19'
+    else:
+        raise SystemExit(f'unknown source {source!r} (pose2sim or panoptic)')
+    views = [{c: convert_poses(v[c], src, 'coco17') for c in cameras} for v in raw]
+    people = int(np.median([max(len(p) for p in v.values()) for v in views]))
+    return Feed(f'{source} {cams} cams', cameras, views, 'coco17', people)
 
 
 def _time_us(fn: Callable[[], Any], repeat: int = 200) -> float:
@@ -135,23 +214,27 @@ def micro(cams: int, people: int, rate: float, seed: int = 0) -> None:
               f'| rclpy messages {s_us:7.1f} us | x{s_us / f_us:4.1f}', flush=True)
 
 
-def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0,
-        markers: bool = False) -> dict:
+def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
+        node_tree: str = '') -> dict:
+    """Feed ``feed`` at ``rate`` into a fusion_node process (``node_tree``: its checkout)."""
     frames = int(seconds * rate)
     warmup = int(3 * rate)             # at most 3 s until the first output (discovery)
-    scene = _scene(cams, people, warmup + frames, rate, seed)
     tmp = tempfile.mkdtemp(prefix='bench_fusion_node_')
     rig = os.path.join(tmp, 'rig.yaml')
-    save_rig_yaml(scene.cameras, rig)
+    save_rig_yaml(feed.cameras, rig)
     over = os.path.join(tmp, 'override.yaml')
     with open(over, 'w') as f:
         yaml.safe_dump({'/**/fusion_node': {'ros__parameters': {
-            'rig_config': rig, 'camera_ids': list(scene.cameras),
+            'rig_config': rig, 'camera_ids': list(feed.cameras), 'layout': feed.layout,
             'sync': {'slop_s': 0.5 / rate}, 'diagnostics': {'period_s': 1.0}}}}, f)
+    env = dict(os.environ)
+    if node_tree:      # that checkout's package first; cwd there too (python puts '' first)
+        env['PYTHONPATH'] = os.path.abspath(node_tree) + os.pathsep + env.get('PYTHONPATH', '')
     log = open(os.path.join(tmp, 'fusion_node.log'), 'w')
     proc = subprocess.Popen(['fusion_node', '--ros-args', '--params-file',
                              os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file',
-                             over], stdout=log, stderr=subprocess.STDOUT)
+                             over], stdout=log, stderr=subprocess.STDOUT, env=env,
+                            cwd=os.path.abspath(node_tree) if node_tree else None)
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('bench_feeder', context=ctx)
@@ -173,9 +256,9 @@ def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0,
 
         node.create_subscription(MarkerArray, '/fusion_node/markers', on_markers,
                                  reliable_qos(100), raw=True)
-    pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(10))
-            for c in scene.cameras}
     try:
+        pubs = {c: node.create_publisher(Person2DArray, camera_topic('/{camera}/persons_2d', c),
+                                         reliable_qos(10)) for c in feed.cameras}
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not all(
                 p.get_subscription_count() for p in pubs.values()):
@@ -184,8 +267,9 @@ def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0,
                 raise RuntimeError(open(log.name).read())
         # Serialise beforehand so the feeder's own cost stays small; stamps patched at send.
         msgs = [{c: bytearray(serialize_message(numpy_to_person2d_array(
-                    v, Header(frame_id=c), c, scene.cameras[c].width, scene.cameras[c].height,
-                    scene.layout))) for c, v in views.items()} for views in scene.views]
+                    v, Header(frame_id=c), c, feed.cameras[c].width, feed.cameras[c].height,
+                    feed.layout))) for c, v in feed.frame(f).items()}
+                for f in range(warmup + frames)]
         period = 1.0 / rate
 
         def send(f: int) -> None:
@@ -221,10 +305,11 @@ def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0,
             send(f)
             next_t += period
             wait_until(next_t)
+        cpu1, wall1 = cpu_seconds(proc.pid), time.monotonic()   # over the feed only
+        sent_outputs = len(e2e)
         end = time.monotonic() + 2.0
         while time.monotonic() < end and len(e2e) < frames:
             ex.spin_once(timeout_sec=0.02)
-        cpu1, wall1 = cpu_seconds(proc.pid), time.monotonic()
         diags.clear()
         end = time.monotonic() + 3.0
         while time.monotonic() < end and not any(
@@ -248,7 +333,8 @@ def run(cams: int, people: int, seconds: float, rate: float, seed: int = 0,
     lat = np.array(e2e[5:]) if len(e2e) > 10 else np.array(e2e)
     tracks = [len(deserialize_message(d, TrackedSkeletonArray).skeletons) for d in outputs[-30:]]
     cpu_s = cpu1 - cpu0
-    return {'cams': cams, 'people': people, 'frames': frames, 'received': len(e2e),
+    return {'cams': len(feed.cameras), 'people': feed.people, 'frames': frames,
+            'received': len(e2e), 'sets_per_s': sent_outputs / (wall1 - wall0),
             'node_median_ms': values.get('latency median (ms)', 'n/a'),
             'node_p95_ms': values.get('latency p95 (ms)', 'n/a'),
             'proc_median_ms': values.get('processing median (ms)', 'n/a'),
@@ -337,6 +423,48 @@ def ns_to_stamp_(ns: int):
     return ns_to_stamp(ns)
 
 
+def real(args: argparse.Namespace) -> int:
+    """Replay real detections (``--real``), optionally A/B against ``--base``; print rows."""
+    trees = [('base', args.base), ('this', '')] if args.base else [('this', '')]
+    print(f'fusion_node on real detections: {args.seconds:g} s per run, median of '
+          f'{args.runs} run(s) per tree (interleaved), markers '
+          f'{"subscribed" if args.markers else "off"}, {os.cpu_count()} CPUs (shared machine)'
+          + (f'; base = {args.base}' if args.base else ''))
+    print('source        cams @ Hz people | tree | node CPU % of one core (ms per set) | '
+          'sets/s | node latency median ms | end-to-end median / p95 ms | tracks')
+    for item in args.real.split(','):
+        source, spec = item.split(':')
+        cams, rate = spec.split('@')
+        feed = real_feed(source, int(cams))
+        rate = float(rate)
+        results: dict = {name: [] for name, _ in trees}
+        for _ in range(max(1, args.runs)):
+            for name, tree in trees:
+                results[name].append(run(feed, args.seconds, rate, markers=args.markers,
+                                         node_tree=tree))
+        for name, _ in trees:
+            rs = results[name]
+
+            def med(key: str) -> float:
+                vals = []
+                for r in rs:
+                    try:
+                        vals.append(float(r[key]))
+                    except (TypeError, ValueError):
+                        pass
+                return float(np.median(vals)) if vals else float('nan')
+
+            per_run = ', '.join(f'{r["cpu_pct"]:.1f}' for r in rs)
+            print(f'{source:<13} {len(feed.cameras):4d} @ {rate:<4g} {feed.people:4d} | '
+                  f'{name:<4} | {med("cpu_pct"):5.1f} ({med("cpu_ms_per_set"):4.2f})'
+                  f'                    | {med("sets_per_s"):5.1f}  | {med("node_median_ms"):6.2f}'
+                  f'                 | {med("e2e_median_ms"):6.2f} / {med("e2e_p95_ms"):<6.2f}'
+                  f'               | {med("mean_tracks"):.1f}   '
+                  f'(CPU % per run: {per_run})',
+                  flush=True)
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--seconds', type=float, default=10.0)
@@ -351,7 +479,14 @@ def main() -> int:
     parser.add_argument('--limits', action='store_true',
                         help='time the drop of a 2,000-person message and the step at the '
                              'input limits (in-process)')
+    parser.add_argument('--real', default='',
+                        help='SOURCE:CAMS@HZ,... real detections (pose2sim, panoptic) instead')
+    parser.add_argument('--base', default='',
+                        help='with --real: also run the fusion_node of this checkout (A/B)')
     args = parser.parse_args()
+    # A DDS domain of its own: other fusion_nodes on this host (a rig, a benchmark) must not
+    # feed or answer this one.
+    os.environ.setdefault('ROS_DOMAIN_ID', str(50 + os.getpid() % 50))
     if args.limits:
         limits()
         return 0
@@ -360,6 +495,8 @@ def main() -> int:
         for item in args.configs.split(','):
             micro(*(int(v) for v in item.lower().split('x')), args.rate)
         return 0
+    if args.real:
+        return real(args)
     print(f'fusion_node benchmark: {args.rate:g} Hz, {args.seconds:g} s per configuration, '
           f'best of {args.runs} run(s), markers {"subscribed" if args.markers else "off"}, '
           f'{os.cpu_count()} CPUs (shared machine: figures vary with load)')
@@ -368,7 +505,8 @@ def main() -> int:
           'tracks')
     for item in args.configs.split(','):
         cams, people = (int(v) for v in item.lower().split('x'))
-        r = min((run(cams, people, args.seconds, args.rate, markers=args.markers)
+        feed = synthetic_feed(cams, people, int((args.seconds + 3) * args.rate), args.rate)
+        r = min((run(feed, args.seconds, args.rate, markers=args.markers)
                  for _ in range(max(1, args.runs))), key=_median)
         print(f'{cams:4d} x {people:<2d}     | {r["node_median_ms"]:>6} / {r["node_p95_ms"]:<6}'
               f'            | {r["e2e_median_ms"]:6.1f} / {r["e2e_p95_ms"]:<6.1f}'
