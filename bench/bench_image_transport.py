@@ -19,9 +19,12 @@ A publisher process sends ``--count`` real Panoptic frames (1920x1080 bgr8, 6.2 
 ``--rate`` Hz with the sensor-data QoS (best effort, depth 5) that camera drivers use; a
 subscriber process (raw subscription, as pose2d_node) counts what arrives. Run once with Fast
 DDS's built-in transports and once with ``config/fastdds_shm.xml`` (what env.sh and
-mv3dpose_bringup apply), and print both:
+mv3dpose_bringup apply), and print both. Each side also reports its CPU time per image;
+``--buffers`` repeats the shared-memory pair with and without ``keep_large_buffers`` (what every
+image-moving node calls at start, ``mv3dpose_ros/ros/memory.py``) to show what the page faults
+of 6 MB allocations cost:
 
-    python bench/bench_image_transport.py [--count 50] [--rate 10] [--reliable]
+    python bench/bench_image_transport.py [--count 50] [--rate 10] [--reliable] [--buffers]
 """
 
 import argparse
@@ -29,6 +32,7 @@ import os
 import subprocess
 import sys
 import time
+from typing import Tuple
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAME = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo', '00_03',
@@ -42,16 +46,28 @@ def _qos(reliable: bool):
     return sensor_qos('reliable' if reliable else 'best_effort', 5)
 
 
+def _buffers(args: argparse.Namespace) -> None:
+    if args.keep_buffers:
+        from mv3dpose_ros.ros.memory import keep_large_buffers
+        keep_large_buffers()
+
+
 def subscriber(args: argparse.Namespace) -> int:
     """Count the images that arrive until none came for 3 s after the first (or 60 s)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import Image
+    _buffers(args)
     rclpy.init()
     node = rclpy.create_node('bench_image_sub')
     got = []
-    node.create_subscription(Image, TOPIC, lambda b: got.append(len(b)), _qos(args.reliable),
-                             raw=True)
+    cpu = []
+
+    def on_image(data: bytes) -> None:
+        got.append(len(data))
+        cpu.append(time.process_time())
+
+    node.create_subscription(Image, TOPIC, on_image, _qos(args.reliable), raw=True)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     print('ready', flush=True)
@@ -63,7 +79,8 @@ def subscriber(args: argparse.Namespace) -> int:
             last = time.monotonic()
         if os.path.exists(args.done_file) and time.monotonic() - last > 3.0:
             break
-    print(f'received {len(got)}', flush=True)
+    per_image = (cpu[-1] - cpu[0]) / (len(cpu) - 1) * 1e3 if len(cpu) > 1 else float('nan')
+    print(f'received {len(got)} cpu_ms {per_image:.2f}', flush=True)
     node.destroy_node()
     rclpy.shutdown()
     return 0
@@ -76,6 +93,7 @@ def publisher(args: argparse.Namespace) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import Image
+    _buffers(args)
     rclpy.init()
     node = rclpy.create_node('bench_image_pub')
     pub = node.create_publisher(Image, TOPIC, _qos(args.reliable))
@@ -88,13 +106,15 @@ def publisher(args: argparse.Namespace) -> int:
     time.sleep(1.0)                      # discovery of the other side settles
     period = 1.0 / args.rate
     t0 = time.monotonic()
+    c0 = time.process_time()
     for k in range(args.count):
         msg.header.stamp = node.get_clock().now().to_msg()
         pub.publish(msg)
         ex.spin_once(timeout_sec=max(0.0, t0 + (k + 1) * period - time.monotonic()))
         while time.monotonic() < t0 + (k + 1) * period:
             time.sleep(0.001)
-    print(f'sent {args.count}', flush=True)
+    per_image = (time.process_time() - c0) / args.count * 1e3
+    print(f'sent {args.count} cpu_ms {per_image:.2f}', flush=True)
     open(args.done_file, 'w').close()
     time.sleep(1.0)
     node.destroy_node()
@@ -102,8 +122,9 @@ def publisher(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_pair(args: argparse.Namespace, profile: str) -> int:
-    """Run a subscriber and a publisher process; return how many images arrived."""
+def run_pair(args: argparse.Namespace, profile: str,
+             keep_buffers: bool = True) -> Tuple[int, float, float]:
+    """Run a subscriber and a publisher process; return (arrived, sub, pub CPU ms/image)."""
     env = dict(os.environ)
     env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)
     env.pop('FASTDDS_DEFAULT_PROFILES_FILE', None)
@@ -113,7 +134,8 @@ def run_pair(args: argparse.Namespace, profile: str) -> int:
     if os.path.exists(done):
         os.unlink(done)
     common = [sys.executable, __file__, '--count', str(args.count), '--rate', str(args.rate),
-              '--done-file', done] + (['--reliable'] if args.reliable else [])
+              '--done-file', done] + (['--reliable'] if args.reliable else []) + \
+        (['--keep-buffers'] if keep_buffers else [])
     sub = subprocess.Popen(common + ['--role', 'sub'], env=env, stdout=subprocess.PIPE,
                            text=True)
     sub.stdout.readline()
@@ -124,7 +146,9 @@ def run_pair(args: argparse.Namespace, profile: str) -> int:
         os.unlink(done)
     if pub.returncode != 0:
         raise SystemExit(f'publisher failed: {pub.stderr[-2000:]}')
-    return int(out.split('received')[-1].split()[0])
+    got = out.split('received')[-1].split()
+    sent = pub.stdout.split('sent')[-1].split()
+    return int(got[0]), float(got[2]), float(sent[2])
 
 
 def main() -> int:
@@ -133,6 +157,9 @@ def main() -> int:
     parser.add_argument('--count', type=int, default=50)
     parser.add_argument('--rate', type=float, default=10.0)
     parser.add_argument('--reliable', action='store_true', help='RELIABLE instead of best effort')
+    parser.add_argument('--buffers', action='store_true',
+                        help='also run the shared-memory pair without keep_large_buffers')
+    parser.add_argument('--keep-buffers', action='store_true', help=argparse.SUPPRESS)
     parser.add_argument('--role', choices=('sub', 'pub'), help=argparse.SUPPRESS)
     parser.add_argument('--done-file', help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -147,10 +174,13 @@ def main() -> int:
     print(f'1920x1080 bgr8 ({1920 * 1080 * 3 / 1e6:.1f} MB), {args.count} images at '
           f'{args.rate:g} Hz, {qos}, depth 5, two processes, '
           f'ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
-    for label, profile in (('Fast DDS built-in transports', ''),
-                           ('config/fastdds_shm.xml', PROFILE)):
-        got = run_pair(args, profile)
-        print(f'{label:30s}: {got}/{args.count} arrived ({100.0 * got / args.count:.0f} %)')
+    runs = [('Fast DDS built-in transports', '', True), ('config/fastdds_shm.xml', PROFILE, True)]
+    if args.buffers:
+        runs.append(('shm, without keep_large_buffers', PROFILE, False))
+    for label, profile, keep in runs:
+        got, sub_ms, pub_ms = run_pair(args, profile, keep)
+        print(f'{label:32s}: {got}/{args.count} arrived ({100.0 * got / args.count:.0f} %); CPU '
+              f'per image: subscriber {sub_ms:.1f} ms, publisher {pub_ms:.1f} ms')
     return 0
 
 
