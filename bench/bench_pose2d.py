@@ -153,18 +153,38 @@ def _shift_px(ref, det) -> float:
     return out
 
 
+def _shift_3d_mm(ref, other) -> list:
+    """Return 3D joint distances [mm] between each reference person and its nearest match."""
+    import numpy as np
+    out = []
+    for a in ref:
+        if not len(other):
+            continue
+        ok_a = np.isfinite(a[:, :3]).all(1)
+        b = min(other, key=lambda d: np.nanmean(np.linalg.norm(d[:, :3] - a[:, :3], axis=1)))
+        both = ok_a & np.isfinite(b[:, :3]).all(1)
+        out += list(1e3 * np.linalg.norm(a[both, :3] - b[both, :3], axis=1))
+    return out
+
+
 def compare(model: str, threads: int) -> int:
     """Print speed and people found of each fetched variant of ``model``."""
     import numpy as np
     from mv3dpose_ros.core.calibration import load_calibration
     from mv3dpose_ros.core.fusion import Fusion
     from mv3dpose_ros.pose2d.estimator import open_estimator
-    from mv3dpose_ros.pose2d.models import get_spec, model_file, PRECISIONS, size_tag
+    from mv3dpose_ros.pose2d.models import (get_spec, list_fetched, model_file, PRECISIONS,
+                                            size_tag)
     demo = os.path.dirname(DATA)
     cams = ('00_03', '00_06', '00_12', '00_13', '00_23')
     frames = ('00004500', '00005514', '00006859', '00009348', '00013007')
     spec = get_spec(model)
-    variants = [(s, p) for p in PRECISIONS for s in spec.sizes
+    # The registry's sizes first (640x640 fp32 is the reference), then every other fetched size
+    # of the model, largest input first.
+    extra = sorted({tuple(meta['input_size']) for _, meta in list_fetched()
+                    if meta.get('name') == model and meta.get('input_size')}
+                   - set(spec.sizes), key=lambda s: -s[0] * s[1])
+    variants = [(s, p) for p in PRECISIONS for s in list(spec.sizes) + extra
                 if os.path.isfile(model_file(model, s, None, p))]
     if not variants or not os.path.isdir(demo):
         print(f'bench_pose2d --compare: skipped: no fetched {model} or no {demo}')
@@ -177,6 +197,7 @@ def compare(model: str, threads: int) -> int:
     wall = [[] for _ in ests]
     cpu = [[] for _ in ests]
     dets = [{} for _ in ests]
+    poses3d = [{} for _ in ests]
     for rep in range(2):
         for key, image in images.items():
             for i, est in enumerate(ests):
@@ -196,11 +217,14 @@ def compare(model: str, threads: int) -> int:
             fusion = Fusion(calib, 'coco17')
             fusion.step({c: dets[i][c, f] for c in cams}, 0.0)
             people.append(int(fusion.last_poses.shape[0]))
+            poses3d[i][f] = fusion.last_poses
+        shift3d = [d for f in frames for d in _shift_3d_mm(poses3d[0][f], poses3d[i][f])]
         shift = [d for key in images for d in _shift_px(dets[0][key], dets[i][key])]
         print(f'  {size_tag(size):>8} {precision}: run median {statistics.median(wall[i]):6.1f} '
               f'ms wall, {statistics.median(cpu[i]):6.1f} ms CPU; 3D people per time point '
               f'{people} (scene: 3); keypoint shift vs {size_tag(variants[0][0])} '
-              f'{variants[0][1]}: median {np.median(shift) if shift else float("nan"):.1f} px')
+              f'{variants[0][1]}: median {np.median(shift) if shift else float("nan"):.1f} px, '
+              f'3D {np.median(shift3d) if shift3d else float("nan"):.0f} mm')
     return 0
 
 

@@ -251,6 +251,55 @@ def test_input_size_auto_fits_the_first_image(ros_context, tmp_path, image_hw, s
         node.destroy_node()
 
 
+def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
+    """Under load, inference_rate_hz auto moves the node to the next fetched smaller input."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    sizes = [(640, 640), (384, 640), (288, 512), (224, 384), (192, 320)]
+    cache = _fake_cache(tmp_path, sizes)          # 192x320: not a registry size, still used
+    node = Pose2DNode(context=ros_context, namespace='/camladder', parameter_overrides=[
+        Parameter('model.cache_dir', value=cache), Parameter('model.threads', value=1),
+        Parameter('model.min_input_side', value=320)])
+    try:
+        assert node.active, node.error
+        node.set_parameters([Parameter('score_threshold', value=0.5)])
+        image = np.zeros((1080, 1920, 3), np.uint8)
+        t = 0
+
+        def frame():
+            nonlocal t
+            t += NS // 10
+            return node.process(numpy_to_image(image, Header(stamp=ns_to_stamp(t)), 'bgr8'))
+
+        assert len(frame().persons) == 1
+        assert tuple(node.estimator.input_size) == (384, 640)
+        assert node._ladder == [(384, 640), (288, 512), (224, 384), (192, 320)]
+        # A camera at 10 Hz, 200 ms per image and images replaced: one step down per dwell.
+        auto, clock = node._auto, 0.0
+        for expected in [(288, 512), (224, 384), (192, 320)]:
+            for _ in range(40):
+                clock += 0.1
+                auto.add_stamp(int(clock * NS))
+                auto.add_replaced()
+                auto.add_processing(0.2)
+                if auto.update(clock):
+                    break
+            out = frame()
+            assert tuple(node.estimator.input_size) == expected
+            assert node.estimator.path == models.model_file('yolo11n-pose', expected, cache)
+            assert node.estimator.score_threshold == 0.5      # dynamic values carried over
+            assert len(out.persons) == 1 and out.header.stamp == ns_to_stamp(t)
+        status = node._diagnose()[0]
+        values = {kv.key: kv.value for kv in status.values}
+        assert values['Input size (HxW)'] == '192x320'
+        assert values['Input size steps (auto)'] == '384x640, 288x512, 224x384, 192x320'
+        # Leaving auto mode goes back to the size fitted to the camera.
+        assert node.set_parameters([Parameter('inference_rate_hz', value=0)])[0].successful
+        frame()
+        assert tuple(node.estimator.input_size) == (384, 640)
+    finally:
+        node.destroy_node()
+
+
 def test_missing_model_is_a_clear_start_error(tmp_path):
     env = dict(os.environ, MV3DPOSE_MODEL_DIR=str(tmp_path))
     res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node', '--ros-args',
@@ -473,9 +522,8 @@ def test_auto_rate_choice_follows_load_with_hysteresis():
                 for _ in range(max(0, int(fps * step_s) - int(step_s / seconds_per_image))):
                     auto.add_replaced()              # what the mailbox replaces meanwhile
             auto.add_processing(seconds_per_image)
-            new = auto.update(t)
-            if new is not None:
-                changes.append(new)
+            if auto.update(t):
+                changes.append(auto.rate_hz)
         return changes
 
     assert run(0.05, 10.0, 10) == []                # 50 ms per 100 ms frame: every image
@@ -493,6 +541,58 @@ def test_auto_rate_choice_follows_load_with_hysteresis():
     auto = AutoInferenceRate()
     assert run(2.0, 1.0, 10, paced=True) == [] and auto.rate_hz == 0.0
     assert run(2.0, 1.0, 10) == [0.3125]            # the same, free-running: a grid
+
+
+def test_auto_mode_shrinks_the_input_before_the_rate_and_grows_it_back():
+    from mv3dpose_ros.nodes.pose2d_node import AutoInferenceRate
+    ladder = [(384, 640), (288, 512), (224, 384)]
+    auto = AutoInferenceRate(ladder)
+    t = 0.0
+    # Inference time of each size in this made-up node: proportional to its pixels.
+    cost = {(384, 640): 0.2, (288, 512): 0.12, (224, 384): 0.07}
+
+    def run(load, n, fps=10.0):
+        nonlocal t
+        seen = []
+        for _ in range(n):
+            proc = cost[auto.size] * load
+            for _ in range(int(fps)):
+                auto.add_stamp(int(1000 * NS + t * NS))
+                t += 1.0 / fps
+            if auto.rate_hz == 0.0:
+                for _ in range(max(0, int(fps) - int(1.0 / proc))):
+                    auto.add_replaced()
+            auto.add_processing(proc)
+            if auto.update(t):
+                seen.append((auto.size, auto.rate_hz))
+        return seen
+
+    assert run(0.4, 10) == []                         # 80 ms per 100 ms frame: kept
+    # 200 ms at 10 Hz: two smaller inputs first (120, then 70 ms: keeps up), no grid rate
+    assert run(1.0, 20) == [((288, 512), 0.0), ((224, 384), 0.0)]
+    assert run(1.0, 20) == []                         # 70 ms per frame: stays, no flapping
+    # slower again (133 ms at the smallest size): now a grid rate, 0.7 x 7.5 Hz -> 5 Hz
+    assert run(1.9, 10) == [((224, 384), 5.0)]
+    # the load goes away: every image first, then the larger inputs back one by one
+    assert run(0.25, 30) == [((224, 384), 0.0), ((288, 512), 0.0), ((384, 640), 0.0)]
+    assert 'ms per image' in auto.reason
+
+
+def test_size_ladder_keeps_the_most_detail_per_step():
+    from mv3dpose_ros.nodes.pose2d_node import size_ladder
+    fetched = [(640, 640), (384, 640), (640, 384), (288, 512), (512, 288), (224, 384),
+               (384, 224)]
+    assert size_ladder((1080, 1920), (384, 640), fetched, 384) == [
+        (384, 640), (288, 512), (224, 384)]
+    assert size_ladder((1920, 1088), (640, 384), fetched, 384) == [
+        (640, 384), (512, 288), (384, 224)]
+    # 4:3: the square input first, then the 16:9 ones (more detail than the portrait ones)
+    assert size_ladder((1080, 1440), (640, 640), fetched, 384) == [
+        (640, 640), (384, 640), (288, 512), (224, 384)]
+    # model.min_input_side: a floor; above the chosen size: no steps
+    assert size_ladder((1080, 1920), (384, 640), fetched, 512) == [(384, 640), (288, 512)]
+    assert size_ladder((1080, 1920), (384, 640), fetched, 1000) == [(384, 640)]
+    assert size_ladder((1080, 1920), (384, 640), [(384, 640)], 384) == [(384, 640)]
 
 
 def test_inference_rate_parameter_accepts_auto_int_and_float(ros_context):

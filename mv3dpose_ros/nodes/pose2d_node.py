@@ -40,20 +40,21 @@ import statistics
 import struct
 import threading
 import time
-from typing import Any, Deque, List, Optional, Tuple, Union
+from typing import Any, Deque, List, Optional, Sequence, Tuple, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError, open_estimator
 from mv3dpose_ros.pose2d.estimator import PoseEstimator
-from mv3dpose_ros.pose2d.models import (fit_size, get_spec, model_file, ModelNotFound,
-                                        parse_size, resolve_model_path, size_tag)
+from mv3dpose_ros.pose2d.models import (fit_size, get_spec, list_fetched, model_file,
+                                        ModelNotFound, parse_size, resolve_model_path, size_tag)
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
 from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
 from mv3dpose_ros.ros.images import numpy_to_image
+from mv3dpose_ros.ros.memory import keep_large_buffers
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
@@ -143,27 +144,47 @@ def on_new_window(stamp_ns: int, last_ns: Optional[int], period_ns: int) -> bool
 
 class AutoInferenceRate:
     """
-    ``inference_rate_hz`` auto: the grid rate one camera's node can sustain (0: every image).
+    ``inference_rate_hz`` auto: the input size and grid rate one camera's node can sustain.
 
     Fed with the header stamps of arriving images (the camera rate), the images replaced in
     the mailbox before inference and the time the node spends on each image it processes,
-    ``update`` returns a new rate when it should change: every image while the node keeps up
-    (also when it is slow but nothing is replaced: a player that waits for the output); once
-    the camera outpaces it (images replaced), the fastest rate of
-    ``AUTO_RATES_HZ`` at ``AUTO_MARGIN`` of what it can infer; one step faster (or every image)
-    only when that stays below ``AUTO_UP``; slower as soon as the rate needs more than
-    ``AUTO_DOWN``. A rate is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at
-    least, so the choice follows the load but does not flap.
+    ``update`` returns True when the node should change what it does now:
+
+    - while the node keeps up (also when it is slow but nothing is replaced: a player that
+      waits for the output), every image at the largest input size;
+    - once the camera outpaces it (images replaced), first a smaller input size of ``sizes``
+      (the ladder ``model.input_size`` auto allows: same aspect, down to
+      ``model.min_input_side``), then the fastest rate of ``AUTO_RATES_HZ`` at ``AUTO_MARGIN``
+      of what it can infer;
+    - back up one step (a faster rate, every image, then a larger size, whose time is
+      estimated from the pixel ratio) only when that stays below ``AUTO_UP``; down as soon as
+      the current step needs more than ``AUTO_DOWN`` of the frame period.
+
+    A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, so it
+    follows the load but does not flap. ``rate_hz`` (0: every image) and ``size`` are the
+    current choice, ``reason`` says why it was made.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, sizes: Sequence[Tuple[int, int]] = ()) -> None:
         self.rate_hz = 0.0                    # current grid rate; 0: every image
+        self.sizes: List[Tuple[int, int]] = [tuple(s) for s in sizes]   # largest first
+        self.size_index = 0
         self._proc_s: Deque[float] = deque(maxlen=AUTO_WINDOW)
         self._steps_ns: Deque[int] = deque(maxlen=16)
         self._last_stamp: Optional[int] = None
         self._replaced = 0                    # images replaced before inference since a change
         self._changed_s: Optional[float] = None
         self.reason = 'every image (no measurement yet)'
+
+    @property
+    def size(self) -> Optional[Tuple[int, int]]:
+        """Input size chosen now (None when the node's size is fixed)."""
+        return self.sizes[self.size_index] if self.sizes else None
+
+    def set_sizes(self, sizes: Sequence[Tuple[int, int]]) -> None:
+        """Set the size ladder (largest first; the first is the size in use now)."""
+        self.sizes = [tuple(s) for s in sizes]
+        self.size_index = 0
 
     def add_stamp(self, stamp_ns: int) -> None:
         """Record the header stamp of an arriving image (before any grid or mailbox)."""
@@ -192,42 +213,73 @@ class AutoInferenceRate:
         """Median time per processed image since the last change (NaN when unknown)."""
         return statistics.median(self._proc_s) if self._proc_s else math.nan
 
-    def update(self, now_s: float) -> Optional[float]:
-        """Return the new grid rate when it changes now (0: every image), else None."""
+    def _pixel_ratio(self, index: int) -> float:
+        """Return pixels of ``sizes[index]`` over those of the size in use."""
+        (h0, w0), (h1, w1) = self.sizes[self.size_index], self.sizes[index]
+        return (h1 * w1) / (h0 * w0)
+
+    def update(self, now_s: float) -> bool:
+        """Return True when the rate or the size changed now (read ``rate_hz`` and ``size``)."""
         if self._changed_s is None:
             self._changed_s = now_s
         if len(self._proc_s) < AUTO_MIN_SAMPLES or now_s - self._changed_s < AUTO_DWELL_S:
-            return None
+            return False
         fps = self.input_hz
         if not math.isfinite(fps):
-            return None
+            return False
         proc = self.processing_s
         cap = 1.0 / proc
-        rate = self.rate_hz
-        new = rate
+        rate, index = self.rate_hz, self.size_index
+        smaller = index + 1 < len(self.sizes)
         if rate == 0.0:
             if fps * proc > AUTO_DOWN and self._replaced >= AUTO_MIN_SAMPLES:
-                new = self.fastest(AUTO_MARGIN * cap)
+                if smaller:
+                    index += 1
+                else:
+                    rate = self.fastest(AUTO_MARGIN * cap)
+            elif index > 0 and fps * proc * self._pixel_ratio(index - 1) <= AUTO_UP:
+                index -= 1
         elif rate * proc > AUTO_DOWN:
-            new = self.fastest(AUTO_MARGIN * cap)
+            rate = self.fastest(AUTO_MARGIN * cap)
         elif fps * proc <= AUTO_UP:
-            new = 0.0
+            rate = 0.0
         elif 2 * rate * proc <= AUTO_UP and 2 * rate < fps:
-            new = 2 * rate
-        if new == rate:
-            return None
-        self.rate_hz = new
+            rate = 2 * rate
+        if (rate, index) == (self.rate_hz, self.size_index):
+            return False
+        self.rate_hz, self.size_index = rate, index
         self._changed_s = now_s
         self._proc_s.clear()
         self._replaced = 0
         self.reason = (f'images at {fps:.2f} Hz, {proc * 1e3:.0f} ms per image (at most '
                        f'{cap:.2f} Hz)')
-        return new
+        return True
 
     @staticmethod
     def fastest(limit_hz: float) -> float:
         """Return the fastest rate of ``AUTO_RATES_HZ`` up to ``limit_hz`` (else the slowest)."""
         return next((r for r in AUTO_RATES_HZ if r <= limit_hz), AUTO_RATES_HZ[-1])
+
+
+def size_ladder(image_hw: Tuple[int, int], chosen: Tuple[int, int],
+                fetched: Sequence[Tuple[int, int]], min_side: int) -> List[Tuple[int, int]]:
+    """
+    Return the input sizes ``inference_rate_hz`` auto may step down to, ``chosen`` first.
+
+    Each next step is, among the ``fetched`` sizes with fewer pixels than the last (less
+    inference time) and a long side of at least ``min_side``, the one whose letterbox keeps
+    the most image detail (largest scale; among equals the fewest pixels). A 1920x1080 camera
+    on 384x640 gets 288x512, then 224x384; a 1088x1920 one on 640x384 gets 512x288, 384x224.
+    """
+    h, w = image_hw
+    scale = {tuple(s): min(s[0] / h, s[1] / w) for s in fetched}
+    out = [tuple(chosen)]
+    while True:
+        last = out[-1][0] * out[-1][1]
+        cheaper = [s for s in scale if s[0] * s[1] < last and max(s) >= min_side]
+        if not cheaper:
+            return out
+        out.append(max(cheaper, key=lambda s: (scale[s], -s[0] * s[1])))
 
 
 #: Per-image stages timed in /diagnostics (medians): capture stamp -> receipt, receipt ->
@@ -245,9 +297,14 @@ PARAMETERS = {
     'model.family': ('auto', 'auto | yolo-pose | movenet-multipose (auto reads the ONNX)', False),
     'model.input_size': ('auto', 'auto: of the fetched sizes of the registered model, the one '
                                  "that fits the first image's aspect (384x640 for 16:9, 640x384 "
-                                 "for portrait); N or HxW: that size; empty: the model's "
-                                 'default. For models with dynamic input it sets the size',
-                         False),
+                                 'for portrait); with inference_rate_hz auto, smaller fetched '
+                                 'sizes down to model.min_input_side are used while the camera '
+                                 'outpaces inference. N or HxW: that size, fixed; empty: the '
+                                 "model's default. For models with dynamic input it sets the "
+                                 'size', False),
+    'model.min_input_side': (384, 'smallest long side of the input that model.input_size auto '
+                                  'steps down to under load (384: 224x384 for 16:9 images); '
+                                  'a value above the chosen size keeps that size fixed', False),
     'model.cache_dir': ('', 'model cache (empty = $MV3DPOSE_MODEL_DIR or '
                             '~/.cache/mv3dpose/models)', False),
     'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
@@ -294,6 +351,7 @@ class Pose2DNode(LifecycleNode):
     """Run a 2D multi-person pose model on one camera's images."""
 
     def __init__(self, node_name: str = 'pose2d_node', **kwargs: Any) -> None:
+        keep_large_buffers()              # 6 MB images without page faults (ros/memory.py)
         super().__init__(node_name, **kwargs)
         for name, (default, text, dynamic) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(
@@ -313,6 +371,8 @@ class Pose2DNode(LifecycleNode):
         self._pending: Union[Image, bytes, None] = None
         self._pending_ns = 0                 # steady clock when the pending image arrived
         self._fit_pending = False            # model.input_size auto: choose at the first image
+        self._ladder: List[Tuple[int, int]] = []  # sizes auto may use, the fitted one first
+        self._estimators: dict = {}          # input size -> opened estimator (ladder steps)
         self._rate_hz = 0.0                  # grid rate in use (0: every image)
         self._auto: Optional[AutoInferenceRate] = None
         self._grid_stamp: Optional[int] = None   # stamp of the image that opened the window
@@ -401,7 +461,7 @@ class Pose2DNode(LifecycleNode):
 
     def _set_rate(self, value: float) -> None:
         """Apply a parsed ``inference_rate_hz``: auto (< 0), every image (0) or fixed."""
-        self._auto = AutoInferenceRate() if value < 0 else None
+        self._auto = AutoInferenceRate(self._ladder) if value < 0 else None
         self._rate_hz = max(0.0, value)
 
     @property
@@ -415,11 +475,14 @@ class Pose2DNode(LifecycleNode):
                                   self._param('model.precision'))
 
     def _fetched_sizes(self) -> List[Tuple[int, int]]:
-        """Return the sizes of the registered model present in the cache, registry order."""
+        """Return the sizes of the registered model in the cache: registry order, then others."""
         spec = get_spec(self._param('model.name'))
         cache = self._param('model.cache_dir') or None
         precision = self._param('model.precision')
-        return [s for s in spec.sizes
+        extra = {tuple(meta['input_size']) for _, meta in list_fetched(cache)
+                 if meta.get('name') == spec.name and len(meta.get('input_size') or ()) == 2
+                 and meta.get('precision', 'fp32') == precision}
+        return [s for s in list(spec.sizes) + sorted(extra - set(spec.sizes))
                 if os.path.isfile(model_file(spec.name, s, cache, precision))]
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -519,6 +582,7 @@ class Pose2DNode(LifecycleNode):
             self._diag.destroy()
             self._diag = None
         self.estimator = None
+        self._estimators = {}
 
     def _stop_worker(self) -> None:
         with self._cv:
@@ -589,23 +653,29 @@ class Pose2DNode(LifecycleNode):
                 self._adapt_rate(time.monotonic() - t0)
 
     def _adapt_rate(self, seconds: float) -> None:
-        """Auto mode: record one image's processing time; apply and log a new grid rate."""
+        """Auto mode: record one image's processing time; apply and log a new size or rate."""
         with self._cv:
             auto = self._auto
             if auto is None:
                 return
             auto.add_processing(seconds)
-            new = auto.update(time.monotonic())
-            if new is None:
+            old_rate, old_size = self._rate_hz, auto.size
+            if not auto.update(time.monotonic()):
                 return
-            old, self._rate_hz = self._rate_hz, new
-        what = f'{new:g} Hz' if new else 'every image'
-        self.get_logger().info(
-            f'camera {self.camera_id}: inference_rate_hz auto: {what} (was '
-            f'{f"{old:g} Hz" if old else "every image"}): {auto.reason}')
+            self._rate_hz = auto.rate_hz
+        if auto.size != old_size:
+            self.get_logger().info(
+                f'camera {self.camera_id}: model.input_size auto: {size_tag(auto.size)} (was '
+                f'{size_tag(old_size)}; steps {", ".join(size_tag(s) for s in auto.sizes)}): '
+                f'{auto.reason}')
+        if auto.rate_hz != old_rate:
+            what = f'{auto.rate_hz:g} Hz' if auto.rate_hz else 'every image'
+            self.get_logger().info(
+                f'camera {self.camera_id}: inference_rate_hz auto: {what} (was '
+                f'{f"{old_rate:g} Hz" if old_rate else "every image"}): {auto.reason}')
 
     def _fit_to(self, image_hw: Tuple[int, int]) -> None:
-        """At the first image: switch to the fetched input size that fits its aspect best."""
+        """At the first image: choose the fetched input size that fits it, and the ladder."""
         self._fit_pending = False
         spec = get_spec(self._param('model.name'))
         est = self.estimator
@@ -618,16 +688,36 @@ class Pose2DNode(LifecycleNode):
                 f'camera {self.camera_id}: {w}x{h} images fit the {size_tag(best)} input of '
                 f'{spec.name} best (same detail, less padding, faster); it is not fetched: '
                 f'run `mv3dpose model fetch --model {spec.name} --size {size_tag(best)}`')
-        if usable == tuple(est.input_size):
-            self.get_logger().info(f'camera {self.camera_id}: input size '
-                                   f'{size_tag(usable)} kept for {w}x{h} images')
+        ladder = size_ladder(image_hw, usable, have, int(self._param('model.min_input_side')))
+        with self._cv:
+            self._ladder = ladder
+            if self._auto is not None:
+                self._auto.set_sizes(ladder)
+        steps = (f'; under load inference_rate_hz auto may step down to '
+                 f'{", ".join(size_tag(s) for s in ladder[1:])}' if len(ladder) > 1 else '')
+        self._use_size(usable)
+        self.get_logger().info(f'camera {self.camera_id}: input size {size_tag(usable)} for '
+                               f'{w}x{h} images (model.input_size auto){steps}')
+
+    def _use_size(self, size: Tuple[int, int]) -> None:
+        """Make ``size`` the input size in use (a registered model's file, opened once)."""
+        est = self.estimator
+        if est is None or tuple(est.input_size) == tuple(size):
             return
-        new = self._open(self._registered_path(usable))
+        self._estimators.setdefault(tuple(est.input_size), est)
+        new = self._estimators.get(tuple(size))
+        if new is None:
+            new = self._estimators[tuple(size)] = self._open(self._registered_path(size))
         for name in ('score_threshold', 'keypoint_threshold', 'nms_iou', 'max_people'):
             setattr(new, name, getattr(est, name))      # dynamic values set since configure
         self.estimator = new
-        self.get_logger().info(f'camera {self.camera_id}: input size {size_tag(usable)} chosen '
-                               f'for {w}x{h} images (model.input_size auto)')
+
+    def _wanted_size(self) -> Optional[Tuple[int, int]]:
+        """Return the input size auto mode wants now (None: keep the one in use)."""
+        auto = self._auto
+        if auto is not None and auto.size is not None:
+            return auto.size
+        return self._ladder[0] if self._ladder else None
 
     def process(self, msg: Union[Image, bytes],
                 arrived_ns: Optional[int] = None) -> Optional[Person2DArray]:
@@ -667,6 +757,18 @@ class Pose2DNode(LifecycleNode):
                 self.get_logger().warning(f'camera {self.camera_id}: keeping input size '
                                           f'{size_tag(self.estimator.input_size)}: {exc}')
             t0 += time.perf_counter() - t_decoded          # a one-off, not image path time
+            t_decoded = time.perf_counter()
+        wanted = self._wanted_size()
+        if wanted is not None and wanted != tuple(self.estimator.input_size):
+            try:
+                self._use_size(wanted)
+            except (ModelError, ModelNotFound, ValueError) as exc:
+                self._ladder = [tuple(self.estimator.input_size)]
+                if self._auto is not None:
+                    self._auto.set_sizes(self._ladder)
+                self.get_logger().warning(f'camera {self.camera_id}: keeping input size '
+                                          f'{size_tag(self.estimator.input_size)}: {exc}')
+            t0 += time.perf_counter() - t_decoded          # a one-off (cached after)
             t_decoded = time.perf_counter()
         est = self.estimator
         det = est.infer(image, order)
@@ -734,6 +836,8 @@ class Pose2DNode(LifecycleNode):
         if est is not None:
             values.update({'Model': est.path, 'Model family': est.family,
                            'Input size (HxW)': f'{est.input_size[0]}x{est.input_size[1]}',
+                           'Input size steps (auto)': ', '.join(size_tag(z) for z in self._ladder)
+                           or 'fixed',
                            'Precision': est.precision, 'Execution provider': est.provider,
                            'Intra-op threads': int(self._param('model.threads')),
                            'Weights licence': est.licence})

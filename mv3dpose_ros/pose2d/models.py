@@ -91,7 +91,10 @@ MODELS: Dict[str, ModelSpec] = {
         weight_sha256='869e83fcdffdc7371fa4e34cd8e51c838cc729571d1635e5141e3075e9319dc0',
         inner_path='', inner_sha256='',
         licence='AGPL-3.0', notice=AGPL_NOTICE,
-        sizes=((640, 640), (384, 640), (640, 384)), size_multiple=32,
+        # 640x640 default; fitted to 16:9 and portrait images; smaller fitted inputs that
+        # inference_rate_hz auto steps down to when the camera outpaces inference.
+        sizes=((640, 640), (384, 640), (640, 384), (288, 512), (512, 288), (224, 384),
+               (384, 224)), size_multiple=32,
         tools=('torch==2.13.0', 'ultralytics==8.4.190', 'onnx==1.23.2', 'onnxslim==0.1.98'),
         constraints=(
             'anyio==4.16.0', 'certifi==2026.10.18',
