@@ -127,19 +127,27 @@ class LiveOutput:
         # per set still held by the smoother: (internal ids published, internal ids observed)
         self._held: Deque[Tuple[Set[int], Set[int]]] = deque()
 
-    def step(self, tracks: Iterable[Track], stamp: float, key: object = None
+    def step(self, tracks: Iterable[Track], stamp: float, key: object = None,
+             smoothed: bool = True
              ) -> Tuple[List[Track], Optional[Tuple[object, float, List[Track]]]]:
-        """Return ``(published tracks, fixed-lag set or None)`` for one set at ``stamp`` s."""
+        """
+        Return ``(published tracks, fixed-lag set or None)`` for one set at ``stamp`` s.
+
+        ``smoothed=False`` (nobody consumes the fixed-lag stream now) skips its estimation and
+        returns None for it; the sets are kept all the same, so the fixed-lag sets returned
+        once ``smoothed`` is True again are exactly those of an uninterrupted stream.
+        """
         tracks = list(tracks)
         published = self.publisher.publish(tracks, stamp)
         if self.smoother is None:
             return published, None
         self._held.append((self.publisher.last_published,
                            {t.track_id for t in tracks if _observed(t)}))
-        done = self.smoother.push(key, stamp, tracks)
+        done = self.smoother.push(key, stamp, tracks, smooth=smoothed)
         if done is None:
             return published, None
-        return published, self._settle(done)
+        settled = self._settle(done, build=smoothed)
+        return published, settled if smoothed else None
 
     def flush(self) -> List[Tuple[object, float, List[Track]]]:
         """Return the fixed-lag sets still held (end of input), settled with what is known."""
@@ -153,11 +161,16 @@ class LiveOutput:
         held = self.flush()
         return self.publisher.reset(tombstones), held
 
-    def _settle(self, done: Tuple[object, float, List[Track]]
+    def _settle(self, done: Tuple[object, float, List[Track]], build: bool = True
                 ) -> Tuple[object, float, List[Track]]:
         """Pick and rename the tracks of the oldest held set (see the class docstring)."""
         key, stamp, tracks = done
         published, _ = self._held.popleft()
+        if not build:       # the bookkeeping only: ids of deleted tracks are let go
+            for t in tracks:
+                if t.state == TrackState.DELETED:
+                    self.publisher.forget(t.track_id)
+            return key, stamp, []
         later: Set[int] = set()
         for _, observed in list(self._held)[:self.lag]:
             later |= observed

@@ -312,13 +312,19 @@ class FixedLagSmoother:
         self._sets: List[Tuple[object, float, List[Track]]] = []
         self._done = 0                    # sets of self._sets already returned
 
-    def push(self, key: object, stamp: float, tracks: Sequence[Track]
+    def push(self, key: object, stamp: float, tracks: Sequence[Track], smooth: bool = True
              ) -> Optional[Tuple[object, float, List[Track]]]:
-        """Add one set; return ``(key, stamp, tracks)`` of the set ``lag`` pushes earlier."""
+        """
+        Add one set; return ``(key, stamp, tracks)`` of the set ``lag`` pushes earlier.
+
+        With ``smooth=False`` that set's tracks are returned as pushed (same ids and states),
+        not re-estimated: for a consumer that needs none now. The window is kept either way,
+        so later sets come out exactly as if every set had been smoothed.
+        """
         self._sets.append((key, float(stamp), list(tracks)))
         if len(self._sets) - self._done <= self.lag:
             return None
-        out = self._smooth(self._done)
+        out = self._smooth(self._done) if smooth else self._sets[self._done]
         self._done += 1
         drop = max(0, self._done - self.back)
         if drop:

@@ -350,6 +350,30 @@ class StreamSynchronizer:
         heads = [b[0][0] for b in self._buffers.values() if b]
         return min(heads) if heads else None
 
+    def next_decision_ns(self, now_ns: int) -> Optional[int]:
+        """
+        Return when (arrival clock, after ``now_ns``) ``poll`` may next let a set go.
+
+        None when nothing is pending. Until then ``poll`` decides nothing that ``add`` did not:
+        the oldest pending set waits until ``max_wait_ns`` after its first message, or until a
+        camera missing from it has been silent long enough (see ``_may_still_come``). A caller
+        may sleep until this time instead of polling on a short timer; the time may be early
+        (``poll`` then decides nothing), never late.
+        """
+        pivot = self.oldest_pending_ns()
+        if pivot is None:
+            return None
+        chosen, first = self._candidates(pivot)
+        due = [first + self.max_wait_ns]
+        for cam in self.camera_ids:
+            if cam not in chosen:
+                last = self._last_accepted_arrival[cam]
+                if last is None:
+                    last = self._first_arrival_ns or now_ns
+                due.append(last + self.max_wait_ns + (self.stats[cam].period_ns or 0) + 1)
+        future = [t for t in due if t > now_ns]
+        return min(future) if future else now_ns
+
     @property
     def held_outliers(self) -> int:
         """Return the number of outlier messages held aside now."""

@@ -77,8 +77,9 @@ NS_PER_S = 1_000_000_000
 #: Longest stretch [ns] empty steps may cover after the last set (tracks are long deleted by
 #: then; a node clock that jumped further must not produce absurd stamps).
 MAX_IDLE_SPAN_NS = 3600 * NS_PER_S
-#: Period [s] of the steady-clock timer that lets sets whose wait ran out go (core.sync.poll).
-POLL_PERIOD_S = 0.01
+#: Shortest delay [s] of the release timer, which wakes when the synchroniser's oldest pending
+#: set may be decided (core.sync.next_decision_ns) and is off while nothing is pending.
+MIN_RELEASE_DELAY_S = 0.0005
 #: Period [s] of the empty steps that age the tracks once no input set arrives.
 IDLE_STEP_S = 0.1
 #: Tracks coast at least this many set periods (median of the recent set stamp steps), beyond
@@ -219,7 +220,10 @@ class FusionNode(Node):
         self.diagnostics = Diagnostics(self, self.diagnostics_period_s)
         self.diagnostics.add_task(self._diag_inputs)
         self.diagnostics.add_task(self._diag_pipeline)
-        self._poll_timer = self.create_timer(POLL_PERIOD_S, self._poll, clock=self._steady)
+        # Off until a set is pending; then armed for the moment it may be decided (no polling).
+        self._release_timer = self.create_timer(1.0, self._poll, clock=self._steady,
+                                                autostart=False)
+        self._release_due: Optional[int] = None
         self._idle_timer = self.create_timer(IDLE_STEP_S, self._idle_step, clock=self._steady)
         self._jump_handle = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(seconds=-0.5),
@@ -566,6 +570,8 @@ class FusionNode(Node):
                 if stamp_ns > 0 and (problem[0] != 'future_stamp' or seen is None or
                                      stamp_ns - seen <= self.sync_config.jump_s * NS_PER_S):
                     self.sync.observe(cam, stamp_ns)   # dropped here, not lost upstream
+                    # Its stamp may show that the camera will send nothing for a pending set.
+                    self._release(arrival)
                 self._reject(state, *problem, now)
                 return
             result = self.sync.add(cam, stamp_ns, poses, arrival)
@@ -585,14 +591,34 @@ class FusionNode(Node):
                 self.get_logger().warning(self.sync.slop_note)
             for synced in result.sets:
                 self._process(synced)
+            self._arm_release()
 
     def _poll(self) -> None:
-        """Let the sets go whose wait for missing cameras ran out (steady clock)."""
+        """Let the sets go whose wait for missing cameras ran out (the release timer)."""
         with self._lock:
-            if self.fusion is None or self.sync.pending() == 0:
-                return
-            for synced in self.sync.poll(steady_ns()):
+            self._release_due = None
+            self._release(steady_ns())
+
+    def _release(self, now: int) -> None:
+        """Process the sets the synchroniser decides at ``now`` (steady), then re-arm."""
+        if self.fusion is not None and self.sync.pending():
+            for synced in self.sync.poll(now):
                 self._process(synced)
+        self._arm_release()
+
+    def _arm_release(self) -> None:
+        """Wake ``_poll`` when the oldest pending set may be decided; sleep while none is."""
+        now = steady_ns()
+        due = self.sync.next_decision_ns(now) if self.fusion is not None else None
+        if due == self._release_due:
+            return
+        self._release_due = due
+        if due is None:
+            self._release_timer.cancel()
+            return
+        self._release_timer.timer_period_ns = max(due - now,
+                                                  int(MIN_RELEASE_DELAY_S * NS_PER_S))
+        self._release_timer.reset()
 
     def _idle_step(self) -> None:
         """
@@ -693,7 +719,10 @@ class FusionNode(Node):
         if not idle:
             self.processing.add(time.perf_counter() - t0)
         self.last_tracks = [t for t in tracks if t.state != TrackState.DELETED]
-        out, smoothed = self.output.step(tracks, stamp_ns / NS_PER_S, stamp_ns)
+        # The fixed-lag estimate only while ~/tracks_smoothed has a subscriber (its window is
+        # kept regardless, so one that joins gets what it would have got all along).
+        want = self.smoothed_pub is not None and self.smoothed_pub.get_subscription_count() > 0
+        out, smoothed = self.output.step(tracks, stamp_ns / NS_PER_S, stamp_ns, smoothed=want)
         self._publish(out, stamp_ns, latency=not idle)
         self._publish_smoothed([smoothed] if smoothed is not None else [])
         self._last_set_ns = stamp_ns
