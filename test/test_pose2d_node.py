@@ -300,6 +300,27 @@ def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
         node.destroy_node()
 
 
+@pytest.mark.skipif(not hasattr(os, 'getpriority'), reason='POSIX thread priorities')
+@pytest.mark.parametrize('nice', [5, 0])
+def test_inference_thread_yields_the_cpu_to_the_light_work(ros_context, tmp_path, nice):
+    """inference_nice: only the inference thread is niced; the executor thread is not."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    cache = _fake_cache(tmp_path, [(384, 640)])
+    node = Pose2DNode(context=ros_context, namespace='/camnice', parameter_overrides=[
+        Parameter('model.cache_dir', value=cache), Parameter('model.threads', value=1),
+        Parameter('inference_nice', value=nice)])
+    try:
+        assert node.active, node.error
+        base = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+        deadline = time.monotonic() + 5
+        while os.getpriority(os.PRIO_PROCESS, node._worker.native_id) != base + nice:
+            assert time.monotonic() < deadline, 'inference thread priority not set'
+            time.sleep(0.01)
+        assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == base
+    finally:
+        node.destroy_node()
+
+
 def test_missing_model_is_a_clear_start_error(tmp_path):
     env = dict(os.environ, MV3DPOSE_MODEL_DIR=str(tmp_path))
     res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node', '--ros-args',

@@ -302,9 +302,11 @@ PARAMETERS = {
                                  'outpaces inference. N or HxW: that size, fixed; empty: the '
                                  "model's default. For models with dynamic input it sets the "
                                  'size', False),
-    'model.min_input_side': (384, 'smallest long side of the input that model.input_size auto '
-                                  'steps down to under load (384: 224x384 for 16:9 images); '
-                                  'a value above the chosen size keeps that size fixed', False),
+    'model.min_input_side': (512, 'smallest long side of the input that model.input_size auto '
+                                  'steps down to under load (512: 288x512 for 16:9 images, the '
+                                  'smallest that kept every person on the Panoptic frames; 384 '
+                                  'allows 224x384); a value above the chosen size keeps it fixed',
+                             False),
     'model.cache_dir': ('', 'model cache (empty = $MV3DPOSE_MODEL_DIR or '
                             '~/.cache/mv3dpose/models)', False),
     'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
@@ -342,6 +344,9 @@ PARAMETERS = {
                                 'the model is free; > 0: infer only the first image of each '
                                 '1/rate window of the header stamps (every camera of a '
                                 'synchronised rig infers the same instants)', True),
+    'inference_nice': (5, 'nice value of the inference thread (0 = unchanged): on a shared '
+                          'CPU the light, latency-critical work (image receipt, publishing, '
+                          'fusion) runs before inference instead of queueing behind it', False),
     'autostart': (True, 'configure and activate at start-up (false: wait for lifecycle '
                         'transitions)', False),
 }
@@ -633,6 +638,15 @@ class Pose2DNode(LifecycleNode):
             self._cv.notify()
 
     def _work(self) -> None:
+        nice = int(self._param('inference_nice'))
+        if nice > 0 and hasattr(os, 'setpriority'):
+            # Only this thread (and onnxruntime's work in it, with 1 intra-op thread): DDS
+            # receipt, publishing and the fusion node then get a shared CPU first.
+            try:
+                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+            except OSError as exc:
+                self.get_logger().warning(f'camera {self.camera_id}: inference_nice {nice} not '
+                                          f'applied: {exc}')
         while True:
             with self._cv:
                 while self._pending is None and not self._stop:
