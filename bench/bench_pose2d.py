@@ -27,8 +27,9 @@ machine load; medians and the overhead (path - bare) / bare are printed. Target:
 ``--compare`` instead measures each fetched variant of the model (sizes, fp32 / int8) on the
 25 real Panoptic views (5 cameras x 5 time points): onnxruntime time per image (median wall
 and CPU, interleaved so all variants see the same load) and the people found, i.e. the 3D
-people the fusion core triangulates from the 5 views at each time point (the scene has 3),
-plus the median keypoint shift against the first variant:
+people the fusion core triangulates from the 5 views at each time point (the scene has 3) and
+from the first 4 (the rig the pipeline benches play), plus the median keypoint shift (2D, and
+of the triangulated joints in 3D) against the first variant:
 
     python bench/bench_pose2d.py --compare [--threads 1]
 """
@@ -190,6 +191,8 @@ def compare(model: str, threads: int) -> int:
         print(f'bench_pose2d --compare: skipped: no fetched {model} or no {demo}')
         return 0
     calib = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cams)
+    # The first 4 cameras: the rig bench_pipeline.py and bench_rig.py play.
+    calib4 = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cams[:4])
     images = {(c, f): cv2.imread(os.path.join(demo, c, f'{c}_{f}.jpg')) for c in cams
               for f in frames}
     ests = [open_estimator(model_file(model, s, None, p), threads=threads)
@@ -212,17 +215,20 @@ def compare(model: str, threads: int) -> int:
     print(f'bench_pose2d --compare: {model} on {len(images)} real 1920x1080 Panoptic views, '
           f'{threads} intra-op thread(s), load {os.getloadavg()}')
     for i, (size, precision) in enumerate(variants):
-        people = []
+        people, people4 = [], []
         for f in frames:
             fusion = Fusion(calib, 'coco17')
             fusion.step({c: dets[i][c, f] for c in cams}, 0.0)
             people.append(int(fusion.last_poses.shape[0]))
             poses3d[i][f] = fusion.last_poses
+            fusion = Fusion(calib4, 'coco17')
+            fusion.step({c: dets[i][c, f] for c in cams[:4]}, 0.0)
+            people4.append(int(fusion.last_poses.shape[0]))
         shift3d = [d for f in frames for d in _shift_3d_mm(poses3d[0][f], poses3d[i][f])]
         shift = [d for key in images for d in _shift_px(dets[0][key], dets[i][key])]
         print(f'  {size_tag(size):>8} {precision}: run median {statistics.median(wall[i]):6.1f} '
               f'ms wall, {statistics.median(cpu[i]):6.1f} ms CPU; 3D people per time point '
-              f'{people} (scene: 3); keypoint shift vs {size_tag(variants[0][0])} '
+              f'{people} (scene: 3), with 4 cameras {people4}; keypoint shift vs {size_tag(variants[0][0])} '
               f'{variants[0][1]}: median {np.median(shift) if shift else float("nan"):.1f} px, '
               f'3D {np.median(shift3d) if shift3d else float("nan"):.0f} mm')
     return 0
