@@ -611,6 +611,26 @@ def test_persons_over_the_limit_dropped_whole_and_counted(harness_factory, scene
     assert h.node.counts['partial_sets'] == 1
 
 
+def test_set_short_of_a_camera_released_when_its_wait_runs_out_without_new_input(
+        harness_factory, scene):
+    """The release timer: the last set, a camera short, goes when its wait ran out."""
+    h = harness_factory(**{'sync.max_wait_s': 0.3, 'sync.max_wait_cap_s': 0.3})
+    t0 = base_ns(12)
+    for cam, msg, _ in stream(scene, t0, range(10)):
+        h.publish(cam, msg)
+    assert h.wait_sets(10)
+    assert h.node.sync.pending() == 0 and h.node._release_timer.is_canceled()  # asleep
+    for cam, msg, _ in stream(scene, t0, [10], skip=lambda c, f: c == 'cam_04'):
+        h.publish(cam, msg)
+    # Nothing else arrives: only the timer armed for the end of the wait can let it go.
+    assert h.wait_sets(11, timeout=5.0), f'pending {h.node.sync.pending()}'
+    last = h.tracks[-1]
+    assert stamp_to_ns(last.header.stamp) == t0 + int(round(10 * NS / FPS))
+    assert h.node.counts['partial_sets'] == 1 and h.node.sync.stats['cam_04'].missing == 1
+    assert sum(t.state == TrackState.CONFIRMED for t in last.skeletons) == scene.num_people
+    assert h.node.sync.pending() == 0 and h.node._release_timer.is_canceled()
+
+
 def test_tracks_deleted_when_every_input_stops(harness_factory, scene):
     """Issue 9 item 5: no stale output; empty steps age the tracks to DELETED."""
     h = harness_factory(**{'fusion.max_coast_s': 0.6})

@@ -14,6 +14,8 @@
 
 """Unit tests of the N-stream synchroniser (stamps in message time, waits on an arrival clock)."""
 
+from collections import Counter
+import copy
 import random
 
 from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig
@@ -513,3 +515,45 @@ def test_detection_delay_varying_by_seconds_between_slow_sets_is_no_outlier():
     # complete; the first ones are lost while the 3.2 s period is unknown.
     steady = [s for s in out if s.stamp_ns >= T0 + 7 * 3200 * MS]
     assert len(steady) == 23 and all(s.complete for s in steady)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_waking_at_next_decision_is_never_late(seed):
+    """
+    Sleeping until ``next_decision_ns`` (fusion_node's release timer) loses no time to polling.
+
+    Drops, delays of 2-60 ms and a camera silent for 40 frames: just before each wake and
+    each arrival, a copy of the synchroniser polled then decides nothing (so a poll at any
+    earlier time would not have either: its rules only ripen with time), and every set goes.
+    """
+    rng = random.Random(seed)
+    events = []                  # (arrival, camera, stamp)
+    for f in range(150):
+        for c in CAMS:
+            if rng.random() < 0.15 or (c == 'cam2' and 50 <= f < 90):
+                continue
+            events.append((f * PERIOD + rng.randint(2, 60) * MS + rng.randint(0, MS),
+                           c, T0 + f * PERIOD))
+    events.sort()
+    sync = make()
+    out, wakes, due = [], 0, None
+
+    def nothing_due_before(t):
+        return copy.deepcopy(sync).poll(t - 1) == []
+
+    for arrival, cam, stamp in events + [(events[-1][0] + 10 * S, None, None)]:
+        while due is not None and due < arrival:
+            assert nothing_due_before(due), 'a set was due before the wake'
+            out += sync.poll(due)
+            wakes += 1
+            due = sync.next_decision_ns(due)
+        assert nothing_due_before(arrival), 'a set was due before this arrival'
+        if cam is not None:      # as fusion_node: add, poll (a late stamp may decide a set)
+            out += sync.add(cam, stamp, cam, arrival).sets + sync.poll(arrival)
+            due = sync.next_decision_ns(arrival)
+    assert sync.pending() == 0 and due is None
+    partial = sum(1 for s in out if not s.complete)
+    views = Counter(stamp for _, _, stamp in events)
+    assert len(out) >= 0.9 * sum(1 for n in views.values() if n >= 2)   # frames of 2 cameras
+    assert partial > 40                        # waits ran out
+    assert wakes < 2 * partial                 # a wake per set that waited, not a poll

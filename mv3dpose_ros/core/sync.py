@@ -354,11 +354,13 @@ class StreamSynchronizer:
         """
         Return when (arrival clock, after ``now_ns``) ``poll`` may next let a set go.
 
-        None when nothing is pending. Until then ``poll`` decides nothing that ``add`` did not:
-        the oldest pending set waits until ``max_wait_ns`` after its first message, or until a
-        camera missing from it has been silent long enough (see ``_may_still_come``). A caller
-        may sleep until this time instead of polling on a short timer; the time may be early
-        (``poll`` then decides nothing), never late.
+        None when nothing is pending. Call it after a ``poll`` at ``now_ns`` (``add`` does not
+        decide sets after a late message, whose stamp may still complete the picture): until
+        the time returned, ``poll`` decides nothing more without a new message, as the oldest
+        pending set waits until ``max_wait_ns`` after its first message, or until a camera
+        missing from it has been silent long enough (see ``_may_still_come``). A caller may
+        sleep until then instead of polling on a short timer; the time may be early (``poll``
+        then decides nothing), never late.
         """
         pivot = self.oldest_pending_ns()
         if pivot is None:

@@ -223,7 +223,7 @@ class FusionNode(Node):
         # Off until a set is pending; then armed for the moment it may be decided (no polling).
         self._release_timer = self.create_timer(1.0, self._poll, clock=self._steady,
                                                 autostart=False)
-        self._release_due: Optional[int] = None
+        self._release_due: Optional[int] = None        # what it is armed for; None: off
         self._idle_timer = self.create_timer(IDLE_STEP_S, self._idle_step, clock=self._steady)
         self._jump_handle = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(seconds=-0.5),
@@ -591,12 +591,12 @@ class FusionNode(Node):
                 self.get_logger().warning(self.sync.slop_note)
             for synced in result.sets:
                 self._process(synced)
-            self._arm_release()
+            self._release(arrival)     # after a late message too (add decides nothing then)
 
     def _poll(self) -> None:
         """Let the sets go whose wait for missing cameras ran out (the release timer)."""
         with self._lock:
-            self._release_due = None
+            self._release_due = -1     # it fired: periodic again until re-armed or cancelled
             self._release(steady_ns())
 
     def _release(self, now: int) -> None:
