@@ -116,3 +116,29 @@ def test_live_output_of_a_synthetic_scene_has_dense_ids_and_exact_stamps():
             assert done[0] == stamp_ns - 3 * 40_000_000            # its own stamp, 3 sets back
     assert sorted(seen) == list(range(1, len(seen) + 1)) and len(seen) == 3
     assert lagged == 57
+
+
+def test_fixed_lag_skipped_while_unwanted_then_exactly_as_if_never_skipped():
+    """fusion_node skips the fixed-lag estimate while nobody subscribes; a joiner sees no gap."""
+    scene = make_scene(num_cameras=4, num_people=3, num_frames=60, seed=4)
+    fusion = Fusion(scene.cameras, scene.layout)
+    steps = [fusion.step(views, stamp) for views, stamp in zip(scene.views, scene.stamps)]
+    always = LiveOutput(fusion.config.publish_coast_s, lag=3, root_joints=(11, 12))
+    lazy = LiveOutput(fusion.config.publish_coast_s, lag=3, root_joints=(11, 12))
+    compared = 0
+    for k, (tracks, stamp) in enumerate(zip(steps, scene.stamps)):
+        want = not 10 <= k < 40           # unsubscribed for 30 sets, then subscribed again
+        pub_a, done_a = always.step(tracks, stamp, k)
+        pub_l, done_l = lazy.step(tracks, stamp, k, smoothed=want)
+        assert _ids(pub_a) == _ids(pub_l)
+        if not want or done_a is None:
+            assert done_l is None
+            continue
+        assert done_l[0] == done_a[0] and _ids(done_l[2]) == _ids(done_a[2])
+        for a, b in zip(done_a[2], done_l[2]):
+            assert a.state == b.state
+            np.testing.assert_array_equal(a.joints, b.joints)
+            np.testing.assert_array_equal(a.joint_variance, b.joint_variance)
+        compared += k >= 40
+    assert compared == 20
+    assert _ids(always.flush()[-1][2]) == _ids(lazy.flush()[-1][2])
