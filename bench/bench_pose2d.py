@@ -229,7 +229,8 @@ def compare(model: str, threads: int) -> int:
         print(f'  {size_tag(size):>8} {precision}: run median {statistics.median(wall[i]):6.1f} '
               f'ms wall, {statistics.median(cpu[i]):6.1f} ms CPU; 3D people per time point '
               f'{people} (scene: 3), with 4 cameras {people4}; keypoint shift vs '
-              f'{size_tag(variants[0][0])} {variants[0][1]}: median {np.median(shift) if shift else float("nan"):.1f} px, '
+              f'{size_tag(variants[0][0])} {variants[0][1]}: median '
+              f'{np.median(shift) if shift else float("nan"):.1f} px, '
               f'3D {np.median(shift3d) if shift3d else float("nan"):.0f} mm')
     return 0
 
