@@ -19,10 +19,11 @@ A publisher process sends ``--count`` real Panoptic frames (1920x1080 bgr8, 6.2 
 ``--rate`` Hz with the sensor-data QoS (best effort, depth 5) that camera drivers use; a
 subscriber process (raw subscription, as pose2d_node) counts what arrives. Run once with Fast
 DDS's built-in transports and once with ``config/fastdds_shm.xml`` (what env.sh and
-mv3dpose_bringup apply), and print both. Each side also reports its CPU time per image;
-``--buffers`` repeats the shared-memory pair with and without ``keep_large_buffers`` (what every
-image-moving node calls at start, ``mv3dpose_ros/ros/memory.py``) to show what the page faults
-of 6 MB allocations cost:
+mv3dpose_bringup apply), and print both. Each side also reports its CPU time per image.
+``--buffers`` repeats the shared-memory pair with glibc told to keep 6 MB buffers in the heap
+(``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``) instead of mapping each one afresh, to
+show what the page faults of image-sized allocations cost (see README, "HD images and the
+CPU", for why the nodes do not do this):
 
     python bench/bench_image_transport.py [--count 50] [--rate 10] [--reliable] [--buffers]
 """
@@ -46,18 +47,11 @@ def _qos(reliable: bool):
     return sensor_qos('reliable' if reliable else 'best_effort', 5)
 
 
-def _buffers(args: argparse.Namespace) -> None:
-    if args.keep_buffers:
-        from mv3dpose_ros.ros.memory import keep_large_buffers
-        keep_large_buffers()
-
-
 def subscriber(args: argparse.Namespace) -> int:
     """Count the images that arrive until none came for 3 s after the first (or 60 s)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import Image
-    _buffers(args)
     rclpy.init()
     node = rclpy.create_node('bench_image_sub')
     got = []
@@ -93,7 +87,6 @@ def publisher(args: argparse.Namespace) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import Image
-    _buffers(args)
     rclpy.init()
     node = rclpy.create_node('bench_image_pub')
     pub = node.create_publisher(Image, TOPIC, _qos(args.reliable))
@@ -123,19 +116,20 @@ def publisher(args: argparse.Namespace) -> int:
 
 
 def run_pair(args: argparse.Namespace, profile: str,
-             keep_buffers: bool = True) -> Tuple[int, float, float]:
+             keep_buffers: bool = False) -> Tuple[int, float, float]:
     """Run a subscriber and a publisher process; return (arrived, sub, pub CPU ms/image)."""
     env = dict(os.environ)
     env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)
     env.pop('FASTDDS_DEFAULT_PROFILES_FILE', None)
     if profile:
         env['FASTRTPS_DEFAULT_PROFILES_FILE'] = profile
+    if keep_buffers:
+        env.update(MALLOC_MMAP_THRESHOLD_=str(32 << 20), MALLOC_TRIM_THRESHOLD_=str(256 << 20))
     done = os.path.join('/tmp', f'bench_images_{os.getpid()}_{bool(profile)}.done')
     if os.path.exists(done):
         os.unlink(done)
     common = [sys.executable, __file__, '--count', str(args.count), '--rate', str(args.rate),
-              '--done-file', done] + (['--reliable'] if args.reliable else []) + \
-        (['--keep-buffers'] if keep_buffers else [])
+              '--done-file', done] + (['--reliable'] if args.reliable else [])
     sub = subprocess.Popen(common + ['--role', 'sub'], env=env, stdout=subprocess.PIPE,
                            text=True)
     sub.stdout.readline()
@@ -158,8 +152,7 @@ def main() -> int:
     parser.add_argument('--rate', type=float, default=10.0)
     parser.add_argument('--reliable', action='store_true', help='RELIABLE instead of best effort')
     parser.add_argument('--buffers', action='store_true',
-                        help='also run the shared-memory pair without keep_large_buffers')
-    parser.add_argument('--keep-buffers', action='store_true', help=argparse.SUPPRESS)
+                        help='also run the shared-memory pair with 6 MB buffers kept in the heap')
     parser.add_argument('--role', choices=('sub', 'pub'), help=argparse.SUPPRESS)
     parser.add_argument('--done-file', help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -174,9 +167,9 @@ def main() -> int:
     print(f'1920x1080 bgr8 ({1920 * 1080 * 3 / 1e6:.1f} MB), {args.count} images at '
           f'{args.rate:g} Hz, {qos}, depth 5, two processes, '
           f'ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
-    runs = [('Fast DDS built-in transports', '', True), ('config/fastdds_shm.xml', PROFILE, True)]
+    runs = [('Fast DDS built-in transports', '', False), ('config/fastdds_shm.xml', PROFILE, False)]
     if args.buffers:
-        runs.append(('shm, without keep_large_buffers', PROFILE, False))
+        runs.append(('shm, buffers kept in the heap', PROFILE, True))
     for label, profile, keep in runs:
         got, sub_ms, pub_ms = run_pair(args, profile, keep)
         print(f'{label:32s}: {got}/{args.count} arrived ({100.0 * got / args.count:.0f} %); CPU '

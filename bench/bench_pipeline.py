@@ -89,7 +89,6 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     from diagnostic_msgs.msg import DiagnosticArray
     from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
     from mv3dpose_ros.ros.images import numpy_to_image
-    from mv3dpose_ros.ros.memory import keep_large_buffers
     from mv3dpose_ros.ros.messages import stamp_to_ns
     from mv3dpose_ros.ros.names import camera_namespace
     from mv3dpose_ros.ros.qos import reliable_qos, sensor_qos
@@ -124,7 +123,6 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
                os.path.join(ROOT, 'config', 'pose2d.yaml'), '--params-file', over]
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=ROOT,
                             start_new_session=True)
-    keep_large_buffers()          # this process plays the cameras: 6 MB images, like a driver
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('bench_pipeline_outputs', context=ctx)

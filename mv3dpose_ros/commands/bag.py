@@ -44,7 +44,6 @@ from typing import Dict, Iterable, List, Optional, Sequence
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, check_bag, DEFAULT_STORAGE
 from mv3dpose_ros.io.bag import partial_dirs
 from mv3dpose_ros.io.bag import salvage, STORAGES, verify_bag
-from mv3dpose_ros.ros.memory import keep_large_buffers
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 
@@ -188,7 +187,6 @@ def record(output: str, topics: Optional[Iterable[str]] = None, storage: str = D
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
-    keep_large_buffers()                  # recorded images without page faults (ros/memory.py)
     wanted = list(topics or [])
     writer = BagWriter(output, storage=storage, overwrite=overwrite)   # fails before any DDS
     stale = partial_dirs(output)

@@ -52,7 +52,6 @@ from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, make_status, OK, RateLimitedLog, WARN
 from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
-from mv3dpose_ros.ros.memory import keep_large_buffers
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, msg_to_tracks,
                                        person2d_array_to_numpy, stamp_to_ns)
 from mv3dpose_ros.ros.names import camera_topic
@@ -83,7 +82,6 @@ class FoxgloveView(Node):
     """DDS subscriptions in, Foxglove WebSocket channels out."""
 
     def __init__(self, node_name: str = 'foxglove_view', **kwargs: Any) -> None:
-        keep_large_buffers()              # 6 MB images without page faults (ros/memory.py)
         super().__init__(node_name, **kwargs)
         d = P.declare
         d(self, 'host', '127.0.0.1', 'Address the WebSocket server binds (loopback by default; '

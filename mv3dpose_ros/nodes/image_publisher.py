@@ -51,7 +51,6 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import cv2
 from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy_to_compressed
-from mv3dpose_ros.ros.memory import keep_large_buffers
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.names import camera_namespace
 from mv3dpose_ros.ros.qos import describe, sensor_qos
@@ -189,7 +188,6 @@ class ImagePublisher(Node):
     """Publish a folder or a video at a fixed rate with stamps ``start + k / rate``."""
 
     def __init__(self, node_name: str = 'image_publisher', **kwargs: Any) -> None:
-        keep_large_buffers()              # 6 MB images without page faults (ros/memory.py)
         super().__init__(node_name, **kwargs)
         for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text,

@@ -54,7 +54,6 @@ from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, le
                                           WARN, WindowStats)
 from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
 from mv3dpose_ros.ros.images import numpy_to_image
-from mv3dpose_ros.ros.memory import keep_large_buffers
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
@@ -356,7 +355,6 @@ class Pose2DNode(LifecycleNode):
     """Run a 2D multi-person pose model on one camera's images."""
 
     def __init__(self, node_name: str = 'pose2d_node', **kwargs: Any) -> None:
-        keep_large_buffers()              # 6 MB images without page faults (ros/memory.py)
         super().__init__(node_name, **kwargs)
         for name, (default, text, dynamic) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(
