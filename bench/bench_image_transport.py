@@ -167,7 +167,8 @@ def main() -> int:
     print(f'1920x1080 bgr8 ({1920 * 1080 * 3 / 1e6:.1f} MB), {args.count} images at '
           f'{args.rate:g} Hz, {qos}, depth 5, two processes, '
           f'ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
-    runs = [('Fast DDS built-in transports', '', False), ('config/fastdds_shm.xml', PROFILE, False)]
+    runs = [('Fast DDS built-in transports', '', False),
+            ('config/fastdds_shm.xml', PROFILE, False)]
     if args.buffers:
         runs.append(('shm, buffers kept in the heap', PROFILE, True))
     for label, profile, keep in runs:

@@ -152,9 +152,8 @@ class AutoInferenceRate:
     - while the node keeps up (also when it is slow but nothing is replaced: a player that
       waits for the output), every image at the largest input size;
     - once the camera outpaces it (images replaced), first a smaller input size of ``sizes``
-      (the ladder ``model.input_size`` auto allows: same aspect, down to
-      ``model.min_input_side``), then the fastest rate of ``AUTO_RATES_HZ`` at ``AUTO_MARGIN``
-      of what it can infer;
+      (the ladder of ``size_ladder``, down to ``model.min_input_side``), then the fastest rate
+      of ``AUTO_RATES_HZ`` at ``AUTO_MARGIN`` of what it can infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP``; down as soon as
       the current step needs more than ``AUTO_DOWN`` of the frame period.
