@@ -36,6 +36,7 @@ from mv3dpose_ros.core.fusion import Fusion
 from mv3dpose_ros.core.output import LiveOutput
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.sequence import evaluate_run, GroundTruth, load_ground_truth
+from mv3dpose_ros.io.datasets import load_panoptic_gt
 from mv3dpose_ros.sim import DetectorNoise, make_scene
 from mv3dpose_ros.sim.detector import detect
 import numpy as np
@@ -117,12 +118,8 @@ def panoptic(noise: DetectorNoise):
                             cameras=names)
     gt = load_ground_truth(folder, 'panoptic')
     frames = sorted(gt.frames)
-    ids_all = sorted({int(i) for f in frames for i in gt.frames[f][0]})
-    poses = np.full((len(frames), len(ids_all), 19, 3), np.nan)
-    for k, f in enumerate(frames):
-        ids, p = gt.frames[f]
-        poses[k, [ids_all.index(int(i)) for i in ids]] = p
-    views, _ = detect(cams, poses, 'panoptic19', noise, seed=0)
+    _, poses = load_panoptic_gt(os.path.join(folder, 'hdPose3d_stage1_coco19')).as_array()
+    views, _ = detect(cams, poses[..., :3], 'panoptic19', noise, seed=0)
     hyps, reproj = run_fusion(cams, 'panoptic19', views, np.array(frames) / 30.0)
     hyps = {frames[k]: v for k, v in hyps.items()}
     rep = evaluate_run('panoptic19', hyps, gt)

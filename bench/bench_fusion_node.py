@@ -131,7 +131,7 @@ def real_feed(source: str, cams: int) -> Feed:
     """Return real detections (``pose2sim`` or ``panoptic``) as a coco17 Feed of ``cams``."""
     from mv3dpose_ros.core.calibration import load_calibration
     from mv3dpose_ros.core.skeleton import convert_poses
-    from mv3dpose_ros.eval.sequence import load_ground_truth
+    from mv3dpose_ros.io.datasets import load_panoptic_gt
     from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
     from mv3dpose_ros.sim.detector import detect
     if source == 'pose2sim':
@@ -153,14 +153,8 @@ def real_feed(source: str, cams: int) -> Feed:
             raise SystemExit(f'panoptic: at most {len(PANOPTIC_CAMERAS)} cameras')
         cameras = load_calibration(os.path.join(folder, 'calibration_160906_band1.json'),
                                    cameras=names)
-        gt = load_ground_truth(folder, 'panoptic')
-        frames = sorted(gt.frames)
-        ids = sorted({int(i) for f in frames for i in gt.frames[f][0]})
-        poses = np.full((len(frames), len(ids), 19, 3), np.nan)
-        for k, f in enumerate(frames):
-            fid, p = gt.frames[f]
-            poses[k, [ids.index(int(i)) for i in fid]] = p
-        raw, _ = detect(cameras, poses, 'panoptic19', seed=0)
+        _, poses = load_panoptic_gt(os.path.join(folder, 'hdPose3d_stage1_coco19')).as_array()
+        raw, _ = detect(cameras, poses[..., :3], 'panoptic19', seed=0)
         src = 'panoptic19'
     else:
         raise SystemExit(f'unknown source {source!r} (pose2sim or panoptic)')
