@@ -20,10 +20,11 @@ A publisher process sends ``--count`` real Panoptic frames (1920x1080 bgr8, 6.2 
 subscriber process (raw subscription, as pose2d_node) counts what arrives. Run once with Fast
 DDS's built-in transports and once with ``config/fastdds_shm.xml`` (what env.sh and
 mv3dpose_bringup apply), and print both. Each side also reports its CPU time per image.
-``--buffers`` repeats the shared-memory pair with glibc told to keep 6 MB buffers in the heap
-(``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``) instead of mapping each one afresh, to
-show what the page faults of image-sized allocations cost (see README, "HD images and the
-CPU", for why the nodes do not do this):
+Both run with the malloc setting the image nodes use (transparent huge pages for image-sized
+buffers, ``mv3dpose_ros/ros/memory.py``). ``--buffers`` repeats the shared-memory pair with
+glibc's defaults (a fresh 4 KiB-page ``mmap`` per 6 MB buffer) and with 6 MB buffers kept in
+the heap (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``; see README, "HD images and
+the CPU", for why the nodes do not do that), to show what the page faults cost:
 
     python bench/bench_image_transport.py [--count 50] [--rate 10] [--reliable] [--buffers]
 """
@@ -34,6 +35,8 @@ import subprocess
 import sys
 import time
 from typing import Tuple
+
+from mv3dpose_ros.ros.memory import OPT_OUT, thp_mode, with_hugepages
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAME = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo', '00_03',
@@ -116,14 +119,23 @@ def publisher(args: argparse.Namespace) -> int:
 
 
 def run_pair(args: argparse.Namespace, profile: str,
-             keep_buffers: bool = False) -> Tuple[int, float, float]:
-    """Run a subscriber and a publisher process; return (arrived, sub, pub CPU ms/image)."""
+             malloc: str = 'hugepages') -> Tuple[int, float, float]:
+    """
+    Run a subscriber and a publisher process; return (arrived, sub, pub CPU ms/image).
+
+    ``malloc``: ``hugepages`` as the nodes run (ros/memory.py), ``glibc`` glibc's defaults,
+    ``heap`` 6 MB buffers kept in the heap (the variant the nodes do not use).
+    """
     env = dict(os.environ)
     env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)
     env.pop('FASTDDS_DEFAULT_PROFILES_FILE', None)
+    env.pop('GLIBC_TUNABLES', None)
     if profile:
         env['FASTRTPS_DEFAULT_PROFILES_FILE'] = profile
-    if keep_buffers:
+    env[OPT_OUT] = '0'
+    if malloc == 'hugepages':
+        env = with_hugepages(dict(env, **{OPT_OUT: '1'}))
+    elif malloc == 'heap':
         env.update(MALLOC_MMAP_THRESHOLD_=str(32 << 20), MALLOC_TRIM_THRESHOLD_=str(256 << 20))
     done = os.path.join('/tmp', f'bench_images_{os.getpid()}_{bool(profile)}.done')
     if os.path.exists(done):
@@ -152,7 +164,8 @@ def main() -> int:
     parser.add_argument('--rate', type=float, default=10.0)
     parser.add_argument('--reliable', action='store_true', help='RELIABLE instead of best effort')
     parser.add_argument('--buffers', action='store_true',
-                        help='also run the shared-memory pair with 6 MB buffers kept in the heap')
+                        help='also run the shared-memory pair with glibc malloc defaults and '
+                             'with 6 MB buffers kept in the heap')
     parser.add_argument('--role', choices=('sub', 'pub'), help=argparse.SUPPRESS)
     parser.add_argument('--done-file', help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -167,12 +180,15 @@ def main() -> int:
     print(f'1920x1080 bgr8 ({1920 * 1080 * 3 / 1e6:.1f} MB), {args.count} images at '
           f'{args.rate:g} Hz, {qos}, depth 5, two processes, '
           f'ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
-    runs = [('Fast DDS built-in transports', '', False),
-            ('config/fastdds_shm.xml', PROFILE, False)]
+    runs = [('Fast DDS built-in transports', '', 'hugepages'),
+            ('config/fastdds_shm.xml', PROFILE, 'hugepages')]
     if args.buffers:
-        runs.append(('shm, buffers kept in the heap', PROFILE, True))
-    for label, profile, keep in runs:
-        got, sub_ms, pub_ms = run_pair(args, profile, keep)
+        runs += [('shm, glibc malloc defaults', PROFILE, 'glibc'),
+                 ('shm, buffers kept in the heap', PROFILE, 'heap')]
+    print(f'transparent huge pages: {thp_mode()}; "hugepages" (the nodes\' setting) is '
+          f'{"in effect" if with_hugepages({}).get("GLIBC_TUNABLES") else "a no-op"} here')
+    for label, profile, malloc in runs:
+        got, sub_ms, pub_ms = run_pair(args, profile, malloc)
         print(f'{label:32s}: {got}/{args.count} arrived ({100.0 * got / args.count:.0f} %); CPU '
               f'per image: subscriber {sub_ms:.1f} ms, publisher {pub_ms:.1f} ms')
     return 0

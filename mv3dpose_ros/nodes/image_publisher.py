@@ -51,6 +51,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import cv2
 from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy_to_compressed
+from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.names import camera_namespace
 from mv3dpose_ros.ros.qos import describe, sensor_qos
@@ -399,6 +400,8 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
 
 def main(args: Optional[List[str]] = None) -> int:
     """Publish until the source ends (or forever with ``--loop``)."""
+    if args is None:
+        reexec_with_hugepages()         # 6 MB images with 2 MiB page faults (ros/memory.py)
     argv = sys.argv if args is None else args
     rclpy.init(args=argv)
     node = None
