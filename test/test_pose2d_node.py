@@ -564,6 +564,56 @@ def test_auto_rate_choice_follows_load_with_hysteresis():
     assert run(2.0, 1.0, 10) == [0.3125]            # the same, free-running: a grid
 
 
+def test_rig_rate_is_the_slowest_announced_and_forgets_the_silent():
+    from mv3dpose_ros.nodes.pose2d_node import RigRate
+    rig = RigRate(ttl_s=3.0)
+    assert rig.common(0.0, 0.0) == 0.0 and rig.common(5.0, 0.0) == 5.0     # nothing heard
+    assert rig.hear(2.5, 0.0) and rig.hear(0.0, 0.5) and rig.hear(10.0, 1.0)
+    assert rig.slowest(1.0) == 2.5
+    assert rig.common(0.0, 1.0) == 2.5 and rig.common(5.0, 1.0) == 2.5      # rig slower
+    assert rig.common(1.25, 1.0) == 1.25                                    # own slower
+    for bad in (float('nan'), float('inf'), -1.0):
+        assert not rig.hear(bad, 1.0)
+    assert rig.common(0.0, 3.5) == 10.0          # 2.5 Hz unheard for 3.5 s: gone
+    assert rig.common(0.0, 4.5) == 0.0           # all gone: every image again
+
+
+def test_auto_cameras_of_a_rig_follow_the_slowest_announced_rate(tmp_path, ros_context):
+    """Two auto-mode nodes announce their rates and take a slower camera's; fixed ones not."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from std_msgs.msg import Float32
+    model, _ = _crafted_model(tmp_path)
+    topic = f'/test_rig_rate_{os.getpid()}'
+    nodes = [Pose2DNode(context=ros_context, namespace=f'/rig{k}', parameter_overrides=[
+        Parameter('model.path', value=model), Parameter('model.threads', value=1),
+        Parameter('rig_rate_topic', value=topic),
+        Parameter('inference_rate_hz', value='auto' if k < 2 else 1.0)]) for k in range(3)]
+    probe = rclpy.create_node('rig_rate_probe', context=ros_context)
+    heard = []
+    probe.create_subscription(Float32, topic, lambda m: heard.append(m.data), reliable_qos(10))
+    slow = probe.create_publisher(Float32, topic, reliable_qos(10))
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in nodes + [probe]:
+        ex.add_node(n)
+    auto = nodes[:2]
+    try:
+        assert all(n.active for n in nodes)
+        # each auto node announces its own choice (every image: 0) once a second
+        assert spin_until(ex, lambda: len(heard) >= 2, 10.0) and set(heard) == {0.0}
+        assert all(n.inference_rate_hz == 0.0 for n in auto)
+        slow.publish(Float32(data=float('nan')))          # malformed: ignored
+        slow.publish(Float32(data=2.5))                   # a slower camera of the rig
+        assert spin_until(ex, lambda: all(n.inference_rate_hz == 2.5 for n in auto), 5.0)
+        assert nodes[2].inference_rate_hz == 1.0          # a fixed rate is the user's
+        # the slow camera goes silent: after the TTL every auto node is on its own again
+        assert spin_until(ex, lambda: all(n.inference_rate_hz == 0.0 for n in auto), 10.0)
+        assert nodes[2].inference_rate_hz == 1.0
+    finally:
+        ex.shutdown()
+        for n in nodes + [probe]:
+            n.destroy_node()
+
+
 def test_auto_mode_shrinks_the_input_before_the_rate_and_grows_it_back():
     from mv3dpose_ros.nodes.pose2d_node import AutoInferenceRate
     ladder = [(384, 640), (288, 512), (224, 384)]

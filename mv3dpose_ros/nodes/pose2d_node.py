@@ -60,9 +60,11 @@ from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, relia
                                   sensor_qos, subscription_events)
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Float32
 
 NS_PER_S = 1_000_000_000
 _STAMP = {True: struct.Struct('<iI'), False: struct.Struct('>iI')}
@@ -96,6 +98,9 @@ AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
 #: Auto mode: processing times kept (median), needed since the last change, and the least time
 #: a rate is kept [s].
 AUTO_WINDOW, AUTO_MIN_SAMPLES, AUTO_DWELL_S = 9, 3, 3.0
+#: Auto mode across a rig: a rate announced on ``rig_rate_topic`` holds the rig back for this
+#: long after it was heard [s] (announced every RIG_RATE_PERIOD_S and at each change).
+RIG_RATE_TTL_S, RIG_RATE_PERIOD_S = 3.0, 1.0
 
 
 def parse_inference_rate(value: Any) -> float:
@@ -260,6 +265,42 @@ class AutoInferenceRate:
         return next((r for r in AUTO_RATES_HZ if r <= limit_hz), AUTO_RATES_HZ[-1])
 
 
+class RigRate:
+    """
+    The grid rate the auto-mode cameras of a rig share: the slowest any of them announced.
+
+    Each node chooses the rate it can sustain alone (``AutoInferenceRate``); cameras on
+    different grids infer different instants, and the fusion node then gets sets with cameras
+    missing (waits, then partial triangulations). Every camera following the slowest rate heard
+    in the last ``ttl_s`` makes them infer the same instants; a camera that stops announcing
+    (stopped, crashed) stops holding the rig back when its announcement expires. 0 (every
+    image) holds nobody back.
+    """
+
+    def __init__(self, ttl_s: float = RIG_RATE_TTL_S) -> None:
+        self.ttl_s = ttl_s
+        self._heard: Deque[Tuple[float, float]] = deque()    # (steady time [s], rate [Hz])
+
+    def hear(self, rate_hz: float, now_s: float) -> bool:
+        """Record an announced rate; False (ignored) unless it is 0 or a finite rate > 0."""
+        if not math.isfinite(rate_hz) or rate_hz < 0:
+            return False
+        if rate_hz > 0:
+            self._heard.append((now_s, rate_hz))
+        return True
+
+    def slowest(self, now_s: float) -> float:
+        """Return the slowest grid rate announced within the TTL (0: none)."""
+        while self._heard and now_s - self._heard[0][0] > self.ttl_s:
+            self._heard.popleft()
+        return min((rate for _, rate in self._heard), default=0.0)
+
+    def common(self, own_hz: float, now_s: float) -> float:
+        """Return the rate to use: the slowest of ``own_hz`` (0: every image) and the rig's."""
+        rates = [r for r in (own_hz, self.slowest(now_s)) if r > 0]
+        return min(rates) if rates else 0.0
+
+
 def size_ladder(image_hw: Tuple[int, int], chosen: Tuple[int, int],
                 fetched: Sequence[Tuple[int, int]], min_side: int) -> List[Tuple[int, int]]:
     """
@@ -343,6 +384,12 @@ PARAMETERS = {
                                 'the model is free; > 0: infer only the first image of each '
                                 '1/rate window of the header stamps (every camera of a '
                                 'synchronised rig infers the same instants)', True),
+    'rig_rate_topic': ('/mv3dpose/pose2d_auto_rate', 'auto mode: the topic on which the '
+                                                     'cameras of a rig announce their grid '
+                                                     'rates (std_msgs/Float32); each follows the '
+                                                     'slowest, so all infer the same instants '
+                                                     '(one topic per rig; empty: each camera '
+                                                     'alone)', False),
     'inference_nice': (5, 'nice value of the inference thread (0 = unchanged): on a shared '
                           'CPU the light, latency-critical work (image receipt, publishing, '
                           'fusion) runs before inference instead of queueing behind it', False),
@@ -378,6 +425,8 @@ class Pose2DNode(LifecycleNode):
         self._estimators: dict = {}          # input size -> opened estimator (ladder steps)
         self._rate_hz = 0.0                  # grid rate in use (0: every image)
         self._auto: Optional[AutoInferenceRate] = None
+        self._rig = RigRate()                # auto mode: the rates the rig's cameras announce
+        self._rig_pub = self._rig_sub = self._rig_timer = None
         self._grid_stamp: Optional[int] = None   # stamp of the image that opened the window
         try:
             self._set_rate(parse_inference_rate(self.get_parameter('inference_rate_hz').value))
@@ -527,6 +576,15 @@ class Pose2DNode(LifecycleNode):
             self._debug_pub = self.create_publisher(Image, '~/debug_image', reliable_qos(1))
         self._diag = Diagnostics(self, float(self._param('diagnostics_period_s')))
         self._diag.add_task(self._diagnose)
+        rig_topic = self._param('rig_rate_topic')
+        if rig_topic:
+            rig_qos = reliable_qos(10)
+            self._rig_pub = self.create_publisher(Float32, rig_topic, rig_qos)
+            self._rig_sub = self.create_subscription(Float32, rig_topic, self._on_rig_rate,
+                                                     rig_qos)
+            # Steady clock: announcements and expiry go on while a bag is paused (sim time).
+            self._rig_timer = self.create_timer(RIG_RATE_PERIOD_S, self._rig_tick,
+                                                clock=Clock(clock_type=ClockType.STEADY_TIME))
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -577,10 +635,15 @@ class Pose2DNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _release(self) -> None:
-        for pub in (self._pub, self._info_pub, self._debug_pub):
+        for pub in (self._pub, self._info_pub, self._debug_pub, self._rig_pub):
             if pub is not None:
                 self.destroy_publisher(pub)
-        self._pub = self._info_pub = self._debug_pub = None
+        self._pub = self._info_pub = self._debug_pub = self._rig_pub = None
+        if self._rig_sub is not None:
+            self.destroy_subscription(self._rig_sub)
+        if self._rig_timer is not None:
+            self.destroy_timer(self._rig_timer)
+        self._rig_sub = self._rig_timer = None
         if self._diag is not None:
             self._diag.destroy()
             self._diag = None
@@ -671,10 +734,12 @@ class Pose2DNode(LifecycleNode):
             if auto is None:
                 return
             auto.add_processing(seconds)
-            old_rate, old_size = self._rate_hz, auto.size
+            old_rate, old_size = auto.rate_hz, auto.size
             if not auto.update(time.monotonic()):
                 return
-            self._rate_hz = auto.rate_hz
+        if auto.rate_hz != old_rate:
+            self._announce_rate()
+        self._apply_rig_rate()
         if auto.size != old_size:
             self.get_logger().info(
                 f'camera {self.camera_id}: model.input_size auto: {size_tag(auto.size)} (was '
@@ -685,6 +750,40 @@ class Pose2DNode(LifecycleNode):
             self.get_logger().info(
                 f'camera {self.camera_id}: inference_rate_hz auto: {what} (was '
                 f'{f"{old_rate:g} Hz" if old_rate else "every image"}): {auto.reason}')
+
+    def _announce_rate(self) -> None:
+        """Auto mode: tell the rig's other cameras the grid rate this one can sustain."""
+        auto, pub = self._auto, self._rig_pub
+        if auto is not None and pub is not None:
+            pub.publish(Float32(data=float(auto.rate_hz)))
+
+    def _on_rig_rate(self, msg: Float32) -> None:
+        if not self._rig.hear(float(msg.data), time.monotonic()):
+            self._rl('rig_rate', f'camera {self.camera_id}: ignored a rate of {msg.data!r} Hz '
+                                 f'on {self._param("rig_rate_topic")} (0 or a finite rate > 0 '
+                                 'expected)', self.get_clock().now().nanoseconds)
+            return
+        self._apply_rig_rate()
+
+    def _rig_tick(self) -> None:
+        self._announce_rate()
+        self._apply_rig_rate()              # announcements expire
+
+    def _apply_rig_rate(self) -> None:
+        """Auto mode: use the slowest of this camera's rate and the rig's; log a change."""
+        with self._cv:
+            auto = self._auto
+            if auto is None:
+                return
+            old = self._rate_hz
+            self._rate_hz = self._rig.common(auto.rate_hz, time.monotonic())
+            new, own = self._rate_hz, auto.rate_hz
+        if new != old:
+            what = f'{new:g} Hz' if new else 'every image'
+            why = ('its own choice' if new == own else
+                   f'the slowest camera of the rig on {self._param("rig_rate_topic")} (its own '
+                   f'choice: {f"{own:g} Hz" if own else "every image"})')
+            self.get_logger().info(f'camera {self.camera_id}: inference rate {what}: {why}')
 
     def _fit_to(self, image_hw: Tuple[int, int]) -> None:
         """At the first image: choose the fetched input size that fits it, and the ladder."""
@@ -841,6 +940,10 @@ class Pose2DNode(LifecycleNode):
                   'Inference rate mode': ('auto' if self._auto is not None else
                                           'fixed' if self._rate_hz else 'every image'),
                   'Inference rate (Hz)': self._rate_hz or 'every image',
+                  'Inference rate, own choice (auto)': (
+                      'n/a' if self._auto is None else self._auto.rate_hz or 'every image'),
+                  'Inference rate, rig slowest (auto)': (
+                      self._rig.slowest(time.monotonic()) or 'none announced'),
                   'Rejected (encoding/size)': self.rejected_encoding,
                   'Rejected (zero stamp)': self.rejected_stamp, 'Inference failures': self.failed,
                   'People in last image': self.people_last}
