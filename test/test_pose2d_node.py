@@ -527,6 +527,29 @@ def test_auto_rate_chain_grids_are_nested():
     assert abs(len(taken[0.625]) - 60 * 0.625) <= 1
 
 
+def test_rig_rates_step_finer_and_keep_the_nested_ones():
+    from mv3dpose_ros.nodes.pose2d_node import AUTO_RATES_HZ, AutoInferenceRate
+    from mv3dpose_ros.nodes.pose2d_node import RIG_AUTO_RATES_HZ
+    assert set(AUTO_RATES_HZ) < set(RIG_AUTO_RATES_HZ)
+    steps = [a / b for a, b in zip(RIG_AUTO_RATES_HZ, RIG_AUTO_RATES_HZ[1:])]
+    assert all(1.3 < s <= 1.5 + 1e-9 for s in steps)
+    auto = AutoInferenceRate(rates=RIG_AUTO_RATES_HZ)
+    t = 0.0
+    for _ in range(10):                      # 400 ms per image at 10 Hz, free-running
+        for _ in range(10):
+            auto.add_stamp(int(1000 * NS + t * NS))
+            t += 0.1
+        if auto.rate_hz == 0.0:
+            for _ in range(8):
+                auto.add_replaced()
+        auto.add_processing(0.4)
+        auto.update(t)
+    # at most 2.5 Hz, 0.7 of it 1.75 Hz: 5/3 Hz on the rig's grid (1.25 Hz on the nested one)
+    assert auto.rate_hz == pytest.approx(5 / 3)
+    assert auto.fastest(2.0) == pytest.approx(5 / 3)
+    assert auto.fastest(0.01) == RIG_AUTO_RATES_HZ[-1]             # the slowest
+
+
 def test_auto_rate_choice_follows_load_with_hysteresis():
     from mv3dpose_ros.nodes.pose2d_node import AutoInferenceRate
     auto = AutoInferenceRate()
@@ -581,7 +604,7 @@ def test_rig_rate_is_the_slowest_announced_and_forgets_the_silent():
 def test_auto_cameras_of_a_rig_follow_the_slowest_announced_rate(tmp_path, ros_context):
     """Two auto-mode nodes announce their rates and take a slower camera's; fixed ones not."""
     from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
-    from std_msgs.msg import Float32
+    from std_msgs.msg import Float64
     model, _ = _crafted_model(tmp_path)
     topic = f'/test_rig_rate_{os.getpid()}'
     nodes = [Pose2DNode(context=ros_context, namespace=f'/rig{k}', parameter_overrides=[
@@ -590,8 +613,8 @@ def test_auto_cameras_of_a_rig_follow_the_slowest_announced_rate(tmp_path, ros_c
         Parameter('inference_rate_hz', value='auto' if k < 2 else 1.0)]) for k in range(3)]
     probe = rclpy.create_node('rig_rate_probe', context=ros_context)
     heard = []
-    probe.create_subscription(Float32, topic, lambda m: heard.append(m.data), reliable_qos(10))
-    slow = probe.create_publisher(Float32, topic, reliable_qos(10))
+    probe.create_subscription(Float64, topic, lambda m: heard.append(m.data), reliable_qos(10))
+    slow = probe.create_publisher(Float64, topic, reliable_qos(10))
     ex = SingleThreadedExecutor(context=ros_context)
     for n in nodes + [probe]:
         ex.add_node(n)
@@ -601,8 +624,8 @@ def test_auto_cameras_of_a_rig_follow_the_slowest_announced_rate(tmp_path, ros_c
         # each auto node announces its own choice (every image: 0) once a second
         assert spin_until(ex, lambda: len(heard) >= 2, 10.0) and set(heard) == {0.0}
         assert all(n.inference_rate_hz == 0.0 for n in auto)
-        slow.publish(Float32(data=float('nan')))          # malformed: ignored
-        slow.publish(Float32(data=2.5))                   # a slower camera of the rig
+        slow.publish(Float64(data=float('nan')))          # malformed: ignored
+        slow.publish(Float64(data=2.5))                   # a slower camera of the rig
         assert spin_until(ex, lambda: all(n.inference_rate_hz == 2.5 for n in auto), 5.0)
         assert nodes[2].inference_rate_hz == 1.0          # a fixed rate is the user's
         # the slow camera goes silent: after the TTL every auto node is on its own again

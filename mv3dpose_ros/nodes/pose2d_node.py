@@ -64,7 +64,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import CompressedImage, Image
-from std_msgs.msg import Float32
+from std_msgs.msg import Float64
 
 NS_PER_S = 1_000_000_000
 _STAMP = {True: struct.Struct('<iI'), False: struct.Struct('>iI')}
@@ -91,6 +91,12 @@ def header_stamp_ns(msg: Any) -> Optional[int]:
 #: window is also the first of a faster one: cameras whose nodes settle on different rates still
 #: infer common instants (those of the slowest).
 AUTO_RATES_HZ = tuple(40.0 / 2 ** k for k in range(10))      # 40 Hz .. 0.078 Hz
+#: Grid rates of cameras that share one rate (``rig_rate_topic``): those of AUTO_RATES_HZ and
+#: 2/3 of each (40, 26.7, 20, 13.3, 10, 6.7, 5, 3.3, 2.5, ... Hz). Steps of 1.33-1.5x instead of
+#: 2x let a rig settle closer to what it sustains; the grids need not nest when every camera
+#: uses the same one.
+RIG_AUTO_RATES_HZ = tuple(sorted(
+    {r for k in range(10) for r in (40.0 / 2 ** k, 80.0 / (3 * 2 ** k))}, reverse=True))
 #: Auto mode: a rate is kept while one image takes at most AUTO_DOWN of its period, a rate is
 #: chosen at AUTO_MARGIN of what the node can infer, the next faster one (or every image) is
 #: taken only below AUTO_UP: the band in between is the hysteresis.
@@ -158,8 +164,9 @@ class AutoInferenceRate:
     - while the node keeps up (also when it is slow but nothing is replaced: a player that
       waits for the output), every image at the largest input size;
     - once the camera outpaces it (images replaced), first a smaller input size of ``sizes``
-      (the ladder of ``size_ladder``, down to ``model.min_input_side``), then the fastest rate
-      of ``AUTO_RATES_HZ`` at ``AUTO_MARGIN`` of what it can infer;
+      (the ladder of ``size_ladder``, down to ``model.min_input_side``), then the fastest of
+      ``rates`` (``AUTO_RATES_HZ``; ``RIG_AUTO_RATES_HZ`` in a rig sharing one rate) at
+      ``AUTO_MARGIN`` of what it can infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP``; down as soon as
       the current step needs more than ``AUTO_DOWN`` of the frame period.
@@ -169,8 +176,10 @@ class AutoInferenceRate:
     current choice, ``reason`` says why it was made.
     """
 
-    def __init__(self, sizes: Sequence[Tuple[int, int]] = ()) -> None:
+    def __init__(self, sizes: Sequence[Tuple[int, int]] = (),
+                 rates: Sequence[float] = AUTO_RATES_HZ) -> None:
         self.rate_hz = 0.0                    # current grid rate; 0: every image
+        self.rates = tuple(sorted(rates, reverse=True))
         self.sizes: List[Tuple[int, int]] = [tuple(s) for s in sizes]   # largest first
         self.size_index = 0
         self._proc_s: Deque[float] = deque(maxlen=AUTO_WINDOW)
@@ -247,8 +256,10 @@ class AutoInferenceRate:
             rate = self.fastest(AUTO_MARGIN * cap)
         elif fps * proc <= AUTO_UP:
             rate = 0.0
-        elif 2 * rate * proc <= AUTO_UP and 2 * rate < fps:
-            rate = 2 * rate
+        else:
+            faster = next((r for r in reversed(self.rates) if r > rate), rate)
+            if faster * proc <= AUTO_UP and faster < fps:
+                rate = faster
         if (rate, index) == (self.rate_hz, self.size_index):
             return False
         self.rate_hz, self.size_index = rate, index
@@ -259,10 +270,9 @@ class AutoInferenceRate:
                        f'{cap:.2f} Hz)')
         return True
 
-    @staticmethod
-    def fastest(limit_hz: float) -> float:
-        """Return the fastest rate of ``AUTO_RATES_HZ`` up to ``limit_hz`` (else the slowest)."""
-        return next((r for r in AUTO_RATES_HZ if r <= limit_hz), AUTO_RATES_HZ[-1])
+    def fastest(self, limit_hz: float) -> float:
+        """Return the fastest of ``rates`` up to ``limit_hz`` (else the slowest)."""
+        return next((r for r in self.rates if r <= limit_hz), self.rates[-1])
 
 
 class RigRate:
@@ -378,16 +388,18 @@ PARAMETERS = {
     'min_rate_hz': (0.0, '[DYNAMIC] output rate below which diagnostics WARN (0 = off)', True),
     'no_input_timeout_s': (5.0, '[DYNAMIC] WARN when no image arrived for this long [s]', True),
     'inference_rate_hz': (-1.0, '[DYNAMIC] -1 or auto: every image while the node keeps up; '
-                                'when images come faster than it infers, a grid rate of '
-                                '40/2^k Hz it can sustain (measured), so the cameras of a rig '
-                                'infer common instants; 0: infer the newest image whenever '
+                                'when images come faster than it infers, a smaller input, then '
+                                'a grid rate it can sustain (measured; the slowest camera\'s '
+                                'for the whole rig, see rig_rate_topic), so the cameras of a '
+                                'rig infer common instants; 0: infer the newest image whenever '
                                 'the model is free; > 0: infer only the first image of each '
                                 '1/rate window of the header stamps (every camera of a '
                                 'synchronised rig infers the same instants)', True),
     'rig_rate_topic': ('/mv3dpose/pose2d_auto_rate', 'auto mode: the topic on which the '
                                                      'cameras of a rig announce their grid '
-                                                     'rates (std_msgs/Float32); each follows the '
-                                                     'slowest, so all infer the same instants '
+                                                     'rates (std_msgs/Float64); each follows the '
+                                                     'slowest, so all infer the same instants, '
+                                                     'on a grid of 1.33-1.5x steps '
                                                      '(one topic per rig; empty: each camera '
                                                      'alone)', False),
     'inference_nice': (5, 'nice value of the inference thread (0 = unchanged): on a shared '
@@ -513,7 +525,8 @@ class Pose2DNode(LifecycleNode):
 
     def _set_rate(self, value: float) -> None:
         """Apply a parsed ``inference_rate_hz``: auto (< 0), every image (0) or fixed."""
-        self._auto = AutoInferenceRate(self._ladder) if value < 0 else None
+        rates = RIG_AUTO_RATES_HZ if self._param('rig_rate_topic') else AUTO_RATES_HZ
+        self._auto = AutoInferenceRate(self._ladder, rates) if value < 0 else None
         self._rate_hz = max(0.0, value)
 
     @property
@@ -579,8 +592,8 @@ class Pose2DNode(LifecycleNode):
         rig_topic = self._param('rig_rate_topic')
         if rig_topic:
             rig_qos = reliable_qos(10)
-            self._rig_pub = self.create_publisher(Float32, rig_topic, rig_qos)
-            self._rig_sub = self.create_subscription(Float32, rig_topic, self._on_rig_rate,
+            self._rig_pub = self.create_publisher(Float64, rig_topic, rig_qos)
+            self._rig_sub = self.create_subscription(Float64, rig_topic, self._on_rig_rate,
                                                      rig_qos)
             # Steady clock: announcements and expiry go on while a bag is paused (sim time).
             self._rig_timer = self.create_timer(RIG_RATE_PERIOD_S, self._rig_tick,
@@ -755,9 +768,9 @@ class Pose2DNode(LifecycleNode):
         """Auto mode: tell the rig's other cameras the grid rate this one can sustain."""
         auto, pub = self._auto, self._rig_pub
         if auto is not None and pub is not None:
-            pub.publish(Float32(data=float(auto.rate_hz)))
+            pub.publish(Float64(data=float(auto.rate_hz)))
 
-    def _on_rig_rate(self, msg: Float32) -> None:
+    def _on_rig_rate(self, msg: Float64) -> None:
         if not self._rig.hear(float(msg.data), time.monotonic()):
             self._rl('rig_rate', f'camera {self.camera_id}: ignored a rate of {msg.data!r} Hz '
                                  f'on {self._param("rig_rate_topic")} (0 or a finite rate > 0 '
@@ -776,7 +789,9 @@ class Pose2DNode(LifecycleNode):
             if auto is None:
                 return
             old = self._rate_hz
-            self._rate_hz = self._rig.common(auto.rate_hz, time.monotonic())
+            common = self._rig.common(auto.rate_hz, time.monotonic())
+            # Snapped to this node's grid rates, so every camera computes the same period.
+            self._rate_hz = auto.fastest(common * (1 + 1e-9)) if common > 0 else 0.0
             new, own = self._rate_hz, auto.rate_hz
         if new != old:
             what = f'{new:g} Hz' if new else 'every image'
