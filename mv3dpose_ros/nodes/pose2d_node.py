@@ -389,7 +389,7 @@ PARAMETERS = {
     'no_input_timeout_s': (5.0, '[DYNAMIC] WARN when no image arrived for this long [s]', True),
     'inference_rate_hz': (-1.0, '[DYNAMIC] -1 or auto: every image while the node keeps up; '
                                 'when images come faster than it infers, a smaller input, then '
-                                'a grid rate it can sustain (measured; the slowest camera\'s '
+                                "a grid rate it can sustain (measured; the slowest camera's "
                                 'for the whole rig, see rig_rate_topic), so the cameras of a '
                                 'rig infer common instants; 0: infer the newest image whenever '
                                 'the model is free; > 0: infer only the first image of each '
