@@ -102,7 +102,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
                  for img in imgs] for c, imgs in frames.items()}
     tmp = tempfile.mkdtemp(prefix='bench_pipeline_')
     log = open(os.path.join(tmp, 'bringup.log'), 'w')
-    params = [f'model.providers:={provider}', 'image_qos.depth:=1'] + list(pose2d_params)
+    params = [f'model.providers:={provider}'] + list(pose2d_params)
     if len(cameras) > 1:
         cmd = ['mv3dpose_bringup', '--rig', RIG, '--cameras', *cameras]
         for p in params:

@@ -506,6 +506,81 @@ def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
             node.destroy_node()
 
 
+def test_grid_mode_dozes_until_the_next_window_is_due(ros_context):
+    """Between windows the inference thread takes nothing; it wakes half a frame early."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    node = Pose2DNode(context=ros_context, namespace='/doze', parameter_overrides=[
+        Parameter('autostart', value=False), Parameter('inference_rate_hz', value=2.0)])
+    ms = 1_000_000
+    try:
+        def history(speed):
+            now = time.time_ns()
+            window = 1000 * NS                      # a 500 ms window opened at 1000 s
+            node._grid_stamp = window
+            node._taken.clear()
+            node._frame_steps.clear()
+            for k in range(-24, 3):                 # 20 Hz camera, up to 100 ms into it
+                # the last image arrives now; stamps run at ``speed`` x the wall clock
+                node._taken.append((now - int((100 - 50 * k) * ms / speed), window + k * 50 * ms))
+                node._frame_steps.append(50 * ms)
+        history(1.0)
+        # next window at +500 ms of stamps, due 400 ms after the last one; wake 25 ms early
+        assert node._doze_s() == pytest.approx(0.375, abs=0.01)
+        history(2.0)                                 # a replay at twice real time
+        assert node._doze_s() == pytest.approx(0.1875, abs=0.01)
+        node._grid_stamp = 1000 * NS + 10 * NS      # stamps far ahead: at most one window
+        assert node._doze_s() <= 0.25 + 1e-6
+        node.set_parameters([Parameter('inference_rate_hz', value=0.0)])
+        assert node._doze_s() == 0.0                 # every image: never dozes
+    finally:
+        node.destroy_node()
+
+
+def test_grid_mode_takes_few_images_and_infers_each_window_first(tmp_path, ros_context):
+    """Real DDS: a 20 Hz camera, a 2 Hz grid; the images between windows are not copied."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    model, _ = _crafted_model(tmp_path)
+    node = Pose2DNode(context=ros_context, namespace='/lazy', cli_args=REMAP,
+                      parameter_overrides=[
+                          Parameter('model.path', value=model),
+                          Parameter('model.threads', value=1),
+                          Parameter('image_qos.reliability', value='reliable'),
+                          Parameter('inference_rate_hz', value=2.0),
+                          Parameter('rig_rate_topic', value='')])
+    probe = rclpy.create_node('lazy_probe', context=ros_context)
+    stamps = []
+    probe.create_subscription(Person2DArray, '/lazy/persons_2d',
+                              lambda m: stamps.append(stamp_to_ns(m.header.stamp)),
+                              reliable_qos(50))
+    pub = probe.create_publisher(Image, '/lazy/image_raw', reliable_qos(5))
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    ex.add_node(probe)
+    img = np.zeros((H, W, 3), np.uint8)
+    try:
+        assert node.active
+        assert spin_until(ex, lambda: pub.get_subscription_count() > 0, 10.0)
+        base = (time.time_ns() // NS + 2) * NS       # stamps on a 50 ms grid from a 500 ms one
+        t0 = time.monotonic()
+        for k in range(80):                          # 4 s of a 20 Hz camera, paced in real time
+            pub.publish(numpy_to_image(img, Header(stamp=ns_to_stamp(base + k * 50_000_000),
+                                                   frame_id='f'), 'bgr8'))
+            while time.monotonic() < t0 + (k + 1) * 0.05:
+                ex.spin_once(timeout_sec=0.01)
+        assert spin_until(ex, lambda: node.received >= 80, 5.0), node.received
+        spin_until(ex, lambda: False, 0.5)
+        # each window of 10 images is inferred from its first one
+        assert len(stamps) >= 6, stamps
+        assert all((s - base) % 500_000_000 == 0 for s in stamps), [s - base for s in stamps]
+        # and only about two of its ten images are copied out of DDS
+        assert node.taken <= node.received // 2, (node.taken, node.received)
+        assert node.skipped + node.processed + node.dropped == node.received
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+
+
 def test_auto_rate_chain_grids_are_nested():
     """Every slower auto rate infers a subset of the instants of every faster one."""
     from mv3dpose_ros.nodes.pose2d_node import AUTO_RATES_HZ, grid_period_ns, on_new_window

@@ -424,7 +424,7 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
             pose_params = _write_params(run_dir / f'pose2d_{ns}.yaml', {f'/{ns}/pose2d_node': {
                 'use_sim_time': True, 'camera_id': cam,
                 'model': {'name': args.model, 'path': model, 'threads': 1},
-                'image_qos': {'reliability': 'reliable', 'depth': 5}, 'debug_image': False}})
+                'image_qos': {'reliability': 'reliable'}, 'debug_image': False}})
             pipeline.start(f'pose2d_{ns}', [
                 'pose2d_node', '--ros-args', '-r', f'__ns:=/{ns}', '-r', 'image:=image_raw',
                 '--params-file', config_file('pose2d.yaml'), '--params-file', pose_params])

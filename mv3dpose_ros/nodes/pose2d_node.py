@@ -199,15 +199,15 @@ class AutoInferenceRate:
         self.sizes = [tuple(s) for s in sizes]
         self.size_index = 0
 
-    def add_stamp(self, stamp_ns: int) -> None:
-        """Record the header stamp of an arriving image (before any grid or mailbox)."""
+    def add_stamp(self, stamp_ns: int, frames: int = 1) -> None:
+        """Record the header stamp of a taken image, ``frames`` camera images after the last."""
         last, self._last_stamp = self._last_stamp, stamp_ns
-        if last is not None and 0 < stamp_ns - last < 10 * NS_PER_S:
-            self._steps_ns.append(stamp_ns - last)
+        if last is not None and frames >= 1 and 0 < stamp_ns - last < 10 * NS_PER_S:
+            self._steps_ns.append((stamp_ns - last) // frames)
 
-    def add_replaced(self) -> None:
-        """Record an image replaced in the mailbox by a newer one before inference."""
-        self._replaced += 1
+    def add_replaced(self, count: int = 1) -> None:
+        """Record images replaced by a newer one before inference."""
+        self._replaced += count
 
     def add_processing(self, seconds: float) -> None:
         """Record the time the node spent on one processed image."""
@@ -376,7 +376,6 @@ PARAMETERS = {
     'max_people': (100, '[DYNAMIC] most people published per image', True),
     'image_qos.reliability': ('best_effort', 'input QoS reliability: best_effort (REP-2003 '
                                              'sensor data) | reliable | system_default', False),
-    'image_qos.depth': (5, 'input QoS history depth', False),
     'image_transport': ('raw', 'raw: sensor_msgs/Image on image | compressed: '
                                'sensor_msgs/CompressedImage (JPEG/PNG) on image/compressed, as '
                                "image_transport's compressed plugin publishes it", False),
@@ -440,6 +439,10 @@ class Pose2DNode(LifecycleNode):
         self._rig = RigRate()                # auto mode: the rates the rig's cameras announce
         self._rig_pub = self._rig_sub = self._rig_timer = None
         self._grid_stamp: Optional[int] = None   # stamp of the image that opened the window
+        self._intake = self._intake_exec = None  # images, taken by the inference thread
+        self._last_seq: Optional[int] = None     # publication sequence number of the last one
+        self._taken: Deque[Tuple[int, int]] = deque(maxlen=32)   # (arrival wall ns, stamp ns)
+        self._frame_steps: Deque[int] = deque(maxlen=16)         # camera frame period [ns]
         try:
             self._set_rate(parse_inference_rate(self.get_parameter('inference_rate_hz').value))
             self._rate_error = ''
@@ -460,7 +463,7 @@ class Pose2DNode(LifecycleNode):
         return self._state_machine.current_state[1] == 'active'
 
     def _reset_stats(self) -> None:
-        self.received = self.processed = self.dropped = self.skipped = 0
+        self.received = self.processed = self.dropped = self.skipped = self.taken = 0
         self.rejected_encoding = self.rejected_stamp = self.failed = 0
         self.people_last = 0
         self._in_freq, self._out_freq = FrequencyStats(), FrequencyStats()
@@ -605,11 +608,8 @@ class Pose2DNode(LifecycleNode):
         info = skeleton_info_msg(self.layout)
         info.header.stamp = self.get_clock().now().to_msg()
         self._info_pub.publish(info)
-        self._stop = False
-        self._worker = threading.Thread(target=self._work, name=f'pose2d-{self.camera_id}',
-                                        daemon=True)
-        self._worker.start()
-        qos = sensor_qos(self._param('image_qos.reliability'), int(self._param('image_qos.depth')))
+        # History depth 1: the inference thread takes the newest image when it is free.
+        qos = sensor_qos(self._param('image_qos.reliability'), 1)
         transport = self._param('image_transport')
         if transport not in ('raw', 'compressed'):
             self.error = f"image_transport must be 'raw' or 'compressed', got {transport!r}"
@@ -617,12 +617,24 @@ class Pose2DNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self._compressed = transport == 'compressed'
         topic = self.resolve_topic_name('image') + '/compressed' if self._compressed else 'image'
+        # Images are taken by the inference thread when the model is free, through a helper
+        # node that only that thread spins, not by this node's executor: taking a 6 MB image
+        # costs 13-25 ms of CPU, and one never taken (skipped by the grid, or superseded while
+        # the model was busy) costs almost nothing (it stays in DDS's shared memory).
         # raw=True: the pixels are read in place from the CDR bytes (decode_image_bytes).
-        self._sub = self.create_subscription(CompressedImage if self._compressed else Image,
-                                             topic, self._on_image, qos,
-                                             event_callbacks=subscription_events(self, topic,
-                                                                                 qos),
-                                             raw=True)
+        self._last_seq = None
+        self._intake = rclpy.create_node(
+            f'{self.get_name()}_intake', namespace=self.get_namespace(), context=self.context,
+            use_global_arguments=False, enable_rosout=False, start_parameter_services=False)
+        self._sub = self._intake.create_subscription(
+            CompressedImage if self._compressed else Image, self.resolve_topic_name(topic),
+            self._on_taken, qos, event_callbacks=subscription_events(self, topic, qos), raw=True)
+        self._intake_exec = SingleThreadedExecutor(context=self.context)
+        self._intake_exec.add_node(self._intake)
+        self._stop = False
+        self._worker = threading.Thread(target=self._work, name=f'pose2d-{self.camera_id}',
+                                        daemon=True)
+        self._worker.start()
         self.get_logger().info(
             f'{self.resolve_topic_name(topic)} [{describe(qos)}] -> '
             f'{self.resolve_topic_name("persons_2d")} [{describe(reliable_qos())}]')
@@ -630,11 +642,16 @@ class Pose2DNode(LifecycleNode):
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Stop taking images and stop the inference thread."""
-        if self._sub is not None:
-            self.destroy_subscription(self._sub)
-            self._sub = None
         self._stop_worker()
+        self._close_intake()
         return TransitionCallbackReturn.SUCCESS
+
+    def _close_intake(self) -> None:
+        if self._intake_exec is not None:
+            self._intake_exec.shutdown(timeout_sec=1.0)
+        if self._intake is not None:
+            self._intake.destroy_node()
+        self._intake = self._intake_exec = self._sub = None
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Release the model and the publishers."""
@@ -675,6 +692,7 @@ class Pose2DNode(LifecycleNode):
     def destroy_node(self) -> None:
         """Stop the worker thread before the node goes."""
         self._stop_worker()
+        self._close_intake()
         super().destroy_node()
 
     # -- data path ------------------------------------------------------------------------------
@@ -687,29 +705,106 @@ class Pose2DNode(LifecycleNode):
         self._grid_stamp = stamp
         return True
 
-    def _on_image(self, msg: Union[Image, bytes]) -> None:
-        """Keep only the newest image; count the one it replaces as dropped."""
+    def _on_taken(self, msg: bytes, info: Any) -> None:
+        """Take one image from the intake; count the camera's images never taken before it."""
+        seq = info.get('publication_sequence_number') if isinstance(info, dict) else None
+        frames = 1
+        if isinstance(seq, int) and seq > 0:
+            last, self._last_seq = self._last_seq, seq
+            if last is not None and 0 < seq - last < 100_000:     # else a new publisher
+                frames = seq - last
+        received = info.get('received_timestamp') if isinstance(info, dict) else None
+        self._on_image(msg, frames, received if isinstance(received, int) and received > 0
+                       else None)
+
+    def _on_image(self, msg: Union[Image, bytes], frames: int = 1,
+                  arrived_ns: Optional[int] = None) -> None:
+        """
+        Keep only the newest image; count the ones it replaces as dropped.
+
+        ``frames``: images the camera published since the last one taken (the ones between
+        were never taken: skipped by the grid, or superseded while the model was busy);
+        ``arrived_ns``: when DDS received it (wall clock; default now).
+        """
         now = self.get_clock().now().nanoseconds
-        arrived = time.time_ns()
+        arrived = arrived_ns or time.time_ns()
+        untaken = max(0, frames - 1)
         with self._cv:
             stamp = header_stamp_ns(msg)
-            if self._auto is not None and stamp is not None and stamp > 0:
-                self._auto.add_stamp(stamp)
+            if stamp is not None and stamp > 0:
+                if self._auto is not None:
+                    self._auto.add_stamp(stamp, frames)
+                if self._taken and frames >= 1 and 0 < stamp - self._taken[-1][1] < NS_PER_S:
+                    self._frame_steps.append((stamp - self._taken[-1][1]) // frames)
+                self._taken.append((arrived, stamp))
+            self.received += frames
+            self.taken += 1
+            self._last_input_ns = now
+            self._in_freq.tick(frames)
+            if self._rate_hz > 0:
+                self.skipped += untaken
+            else:
+                self.dropped += untaken
+                if self._auto is not None and untaken:
+                    self._auto.add_replaced(untaken)
             if self._rate_hz > 0 and not self._on_grid(stamp):
                 self.skipped += 1
-                self.received += 1
-                self._last_input_ns = now
-                self._in_freq.tick()
                 return
             if self._pending is not None:
                 self.dropped += 1
                 if self._auto is not None:
                     self._auto.add_replaced()
             self._pending, self._pending_ns = msg, arrived
-            self.received += 1
-            self._last_input_ns = now
-            self._in_freq.tick()
             self._cv.notify()
+
+    def _doze_s(self) -> float:
+        """
+        Return how long to wait before taking the next image, in grid mode.
+
+        The camera's images of the window already inferred are not needed: wait until half a
+        frame before the next window's first image can arrive (predicted from the stamps and
+        the arrival times of the images taken, with the shortest transport seen, so replays
+        faster or slower than real time work), at most one window. Waking early costs one
+        take of an image still in the old window; waking up to a frame late still takes the
+        window's first image (the newest then). Each image not taken is one 6 MB copy less.
+        """
+        with self._cv:
+            rate, last = self._rate_hz, self._grid_stamp
+            if rate <= 0 or last is None or len(self._taken) < 2 or not self._frame_steps:
+                return 0.0
+            taken = list(self._taken)
+            frame_ns = statistics.median(self._frame_steps)
+        (w0, s0), (w1, s1) = taken[0], taken[-1]
+        period = grid_period_ns(rate)
+        start = (last // period + 1) * period             # stamp opening the next window
+        if start <= s1:
+            return 0.0
+        speed = (s1 - s0) / (w1 - w0) if w1 - w0 > NS_PER_S // 2 and s1 > s0 else 1.0
+        speed = min(10.0, max(0.1, speed))                 # stamp ns per wall-clock ns
+        transport = min(w - s / speed for w, s in taken)   # wall arrival - stamp, shortest
+        wake = transport + (start - frame_ns / 2) / speed
+        return min(max(0.0, (wake - time.time_ns()) / 1e9), period / speed / 1e9)
+
+    def _take_next(self) -> None:
+        """Wait up to 0.1 s for an image and take it (the newest; see on_activate)."""
+        doze = self._doze_s()
+        if doze > 0.002:
+            with self._cv:
+                if not self._stop:
+                    self._cv.wait(min(doze, 1.0))
+            return
+        ex = self._intake_exec
+        if ex is None:
+            with self._cv:
+                self._cv.wait(0.1)
+            return
+        try:
+            ex.spin_once(timeout_sec=0.1)
+        except Exception as exc:  # noqa: B902 - e.g. shut down while deactivating
+            if not self._stop:
+                self._rl('intake', f'camera {self.camera_id}: taking an image failed: {exc!r}',
+                         self.get_clock().now().nanoseconds)
+                time.sleep(0.1)
 
     def _work(self) -> None:
         nice = int(self._param('inference_nice'))
@@ -723,12 +818,13 @@ class Pose2DNode(LifecycleNode):
                                           f'applied: {exc}')
         while True:
             with self._cv:
-                while self._pending is None and not self._stop:
-                    self._cv.wait()
                 if self._stop:
                     return
                 msg, self._pending = self._pending, None
                 arrived = self._pending_ns
+            if msg is None:
+                self._take_next()
+                continue
             t0 = time.monotonic()
             try:
                 out = self.process(msg, arrived)
@@ -949,6 +1045,7 @@ class Pose2DNode(LifecycleNode):
         values = {'Input frequency (Hz)': rate_in, **values, **ts_values,
                   'Inference latency median (ms)': infer50, 'Inference latency p95 (ms)': infer95,
                   'Whole path median (ms)': path50, **stage50, 'Images received': self.received,
+                  'Images taken from DDS (copied)': self.taken,
                   'Images processed': self.processed,
                   'Dropped before inference (newer image arrived)': self.dropped,
                   'Skipped (inference_rate_hz grid)': self.skipped,
