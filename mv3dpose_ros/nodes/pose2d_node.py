@@ -17,20 +17,22 @@ pose2d_node: one camera's ``sensor_msgs/Image`` -> ``mv3dpose_msgs/Person2DArray
 
 Topics (relative, so ``-r __ns:=/cam0`` puts them under the camera):
 
-- sub ``image`` (SensorDataQoS; reliability/depth overridable by ``image_qos.*``),
+- sub ``image`` (SensorDataQoS, history depth 1; reliability from ``image_qos.reliability``),
   encodings bgr8 / rgb8 / mono8 (and 8UC3 / 8UC1); others are rejected with a rate-limited
-  error and counted.
+  error and counted. Held by a helper node ``<name>_intake`` (see below).
+- pub/sub ``rig_rate_topic`` (``std_msgs/Float64``, auto mode): the rig's shared grid rate.
 - pub ``persons_2d`` (RELIABLE, KEEP_LAST 10): one message per processed image, header copied
   verbatim, also when empty; images with a zero stamp are rejected (no output).
 - pub ``skeleton_info`` (RELIABLE + TRANSIENT_LOCAL, depth 1): the coco17 layout, latched.
 - pub ``~/debug_image`` (bgr8): drawn only while someone subscribes.
 - pub ``/diagnostics``: input/output rate, inference and whole-path latency, drops, rejects.
 
-Only the newest image is processed: the subscription callback stores it in a one-slot mailbox
-(a replaced, never-processed image counts as dropped) and a worker thread runs inference
-(onnxruntime releases the GIL, so the executor keeps receiving meanwhile). The node is a
-lifecycle node: the model loads in ``on_configure``, the subscription exists while active;
-``autostart`` (default true) configures and activates it at start-up.
+Only the newest image is processed. The inference thread takes it from DDS itself when the
+model is free (spinning the ``<name>_intake`` helper node, which no executor spins), so images
+skipped by the grid or superseded while the model was busy are never copied out of DDS's
+shared memory; they are counted from the publication sequence numbers (superseded ones as
+dropped). The node is a lifecycle node: the model loads in ``on_configure``, the subscription
+exists while active; ``autostart`` (default true) configures and activates it at start-up.
 """
 
 from collections import deque
