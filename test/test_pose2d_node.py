@@ -623,6 +623,23 @@ def test_rig_rates_step_finer_and_keep_the_nested_ones():
     assert auto.rate_hz == pytest.approx(5 / 3)
     assert auto.fastest(2.0) == pytest.approx(5 / 3)
     assert auto.fastest(0.01) == RIG_AUTO_RATES_HZ[-1]             # the slowest
+    assert 0.7 / 0.28 < 2.5 and auto.fastest(0.7 / 0.28) == 2.5   # not a step lower
+
+    def load(seconds_per_image, n=10):
+        nonlocal t
+        seen = []
+        for _ in range(n):
+            for _ in range(10):
+                auto.add_stamp(int(1000 * NS + t * NS))
+                t += 0.1
+            auto.add_processing(seconds_per_image)
+            if auto.update(t):
+                seen.append(auto.rate_hz)
+        return seen
+    # a mild overload (5/3 Hz x 0.6 s = 1.0 of the period): one rate slower, not to 0.7 of it
+    assert load(0.6) == [1.25]
+    # a heavy one (1.25 Hz x 1.5 s = 1.9): straight to 0.7 x 0.67 Hz -> 5/12 Hz
+    assert load(1.5) == [pytest.approx(5 / 12)]
 
 
 def test_auto_rate_choice_follows_load_with_hysteresis():

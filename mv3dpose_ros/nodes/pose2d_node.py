@@ -103,6 +103,9 @@ RIG_AUTO_RATES_HZ = tuple(sorted(
 #: chosen at AUTO_MARGIN of what the node can infer, the next faster one (or every image) is
 #: taken only below AUTO_UP: the band in between is the hysteresis.
 AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
+#: Auto mode: a grid rate needing up to AUTO_GENTLE of its period steps down one rate only (a
+#: mild overload, often one noisy measurement); above it, straight to AUTO_MARGIN.
+AUTO_GENTLE = 1.2
 #: Auto mode: processing times kept (median), needed since the last change, and the least time
 #: a rate is kept [s].
 AUTO_WINDOW, AUTO_MIN_SAMPLES, AUTO_DWELL_S = 9, 3, 3.0
@@ -171,7 +174,8 @@ class AutoInferenceRate:
       ``AUTO_MARGIN`` of what it can infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP``; down as soon as
-      the current step needs more than ``AUTO_DOWN`` of the frame period.
+      the current step needs more than ``AUTO_DOWN`` of the frame period (one grid rate
+      slower while it needs at most ``AUTO_GENTLE``, else at ``AUTO_MARGIN`` at once).
 
     A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, so it
     follows the load but does not flap. ``rate_hz`` (0: every image) and ``size`` are the
@@ -255,7 +259,8 @@ class AutoInferenceRate:
             elif index > 0 and fps * proc * self._pixel_ratio(index - 1) <= AUTO_UP:
                 index -= 1
         elif rate * proc > AUTO_DOWN:
-            rate = self.fastest(AUTO_MARGIN * cap)
+            slower = next((r for r in self.rates if r < rate), rate)
+            rate = slower if rate * proc <= AUTO_GENTLE else self.fastest(AUTO_MARGIN * cap)
         elif fps * proc <= AUTO_UP:
             rate = 0.0
         else:
@@ -274,7 +279,8 @@ class AutoInferenceRate:
 
     def fastest(self, limit_hz: float) -> float:
         """Return the fastest of ``rates`` up to ``limit_hz`` (else the slowest)."""
-        return next((r for r in self.rates if r <= limit_hz), self.rates[-1])
+        limit = limit_hz * (1 + 1e-9)          # 0.7 x 3.57 Hz is 2.5 Hz, not 1.67 Hz
+        return next((r for r in self.rates if r <= limit), self.rates[-1])
 
 
 class RigRate:
