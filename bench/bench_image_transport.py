@@ -130,11 +130,11 @@ def run_pair(args: argparse.Namespace, profile: str,
     env.pop('FASTRTPS_DEFAULT_PROFILES_FILE', None)
     env.pop('FASTDDS_DEFAULT_PROFILES_FILE', None)
     env.pop('GLIBC_TUNABLES', None)
+    env.pop(OPT_OUT, None)
     if profile:
         env['FASTRTPS_DEFAULT_PROFILES_FILE'] = profile
-    env[OPT_OUT] = '0'
     if malloc == 'hugepages':
-        env = with_hugepages(dict(env, **{OPT_OUT: '1'}))
+        env = with_hugepages(env)
     elif malloc == 'heap':
         env.update(MALLOC_MMAP_THRESHOLD_=str(32 << 20), MALLOC_TRIM_THRESHOLD_=str(256 << 20))
     done = os.path.join('/tmp', f'bench_images_{os.getpid()}_{bool(profile)}.done')

@@ -518,11 +518,10 @@ def test_grid_mode_dozes_until_the_next_window_is_due(ros_context):
             window = 1000 * NS                      # a 500 ms window opened at 1000 s
             node._grid_stamp = window
             node._taken.clear()
-            node._frame_steps.clear()
             for k in range(-24, 3):                 # 20 Hz camera, up to 100 ms into it
                 # the last image arrives now; stamps run at ``speed`` x the wall clock
-                node._taken.append((now - int((100 - 50 * k) * ms / speed), window + k * 50 * ms))
-                node._frame_steps.append(50 * ms)
+                node._taken.append((now - int((100 - 50 * k) * ms / speed),
+                                    window + k * 50 * ms, 1))
         history(1.0)
         # next window at +500 ms of stamps, due 400 ms after the last one; wake 25 ms early
         assert node._doze_s() == pytest.approx(0.375, abs=0.01)

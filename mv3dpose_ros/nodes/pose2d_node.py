@@ -449,8 +449,8 @@ class Pose2DNode(LifecycleNode):
         self._grid_stamp: Optional[int] = None   # stamp of the image that opened the window
         self._intake = self._intake_exec = None  # images, taken by the inference thread
         self._last_seq: Optional[int] = None     # publication sequence number of the last one
-        self._taken: Deque[Tuple[int, int]] = deque(maxlen=32)   # (arrival wall ns, stamp ns)
-        self._frame_steps: Deque[int] = deque(maxlen=16)         # camera frame period [ns]
+        # images taken: (arrival wall ns, stamp ns, camera frames since the one before)
+        self._taken: Deque[Tuple[int, int, int]] = deque(maxlen=32)
         try:
             self._set_rate(parse_inference_rate(self.get_parameter('inference_rate_hz').value))
             self._rate_error = ''
@@ -742,22 +742,20 @@ class Pose2DNode(LifecycleNode):
             if stamp is not None and stamp > 0:
                 if self._auto is not None:
                     self._auto.add_stamp(stamp, frames)
-                if self._taken and frames >= 1 and 0 < stamp - self._taken[-1][1] < NS_PER_S:
-                    self._frame_steps.append((stamp - self._taken[-1][1]) // frames)
-                self._taken.append((arrived, stamp))
+                self._taken.append((arrived, stamp, frames))
             self.received += frames
             self.taken += 1
             self._last_input_ns = now
             self._in_freq.tick(frames)
             if self._rate_hz > 0:
                 self.skipped += untaken
+                if not self._on_grid(stamp):
+                    self.skipped += 1
+                    return
             else:
                 self.dropped += untaken
                 if self._auto is not None and untaken:
                     self._auto.add_replaced(untaken)
-            if self._rate_hz > 0 and not self._on_grid(stamp):
-                self.skipped += 1
-                return
             if self._pending is not None:
                 self.dropped += 1
                 if self._auto is not None:
@@ -778,18 +776,20 @@ class Pose2DNode(LifecycleNode):
         """
         with self._cv:
             rate, last = self._rate_hz, self._grid_stamp
-            if rate <= 0 or last is None or len(self._taken) < 2 or not self._frame_steps:
-                return 0.0
             taken = list(self._taken)
-            frame_ns = statistics.median(self._frame_steps)
-        (w0, s0), (w1, s1) = taken[0], taken[-1]
+        steps = [(s1 - s0) // f1 for (_, s0, _), (_, s1, f1) in zip(taken, taken[1:])
+                 if f1 >= 1 and 0 < s1 - s0 < NS_PER_S]        # camera frame periods
+        if rate <= 0 or last is None or not steps:
+            return 0.0
+        frame_ns = statistics.median(steps[-16:])
+        (w0, s0, _), (w1, s1, _) = taken[0], taken[-1]
         period = grid_period_ns(rate)
         start = (last // period + 1) * period             # stamp opening the next window
         if start <= s1:
             return 0.0
         speed = (s1 - s0) / (w1 - w0) if w1 - w0 > NS_PER_S // 2 and s1 > s0 else 1.0
         speed = min(10.0, max(0.1, speed))                 # stamp ns per wall-clock ns
-        transport = min(w - s / speed for w, s in taken)   # wall arrival - stamp, shortest
+        transport = min(w - s / speed for w, s, _ in taken)   # wall arrival - stamp, shortest
         wake = transport + (start - frame_ns / 2) / speed
         return min(max(0.0, (wake - time.time_ns()) / 1e9), period / speed / 1e9)
 
@@ -895,7 +895,7 @@ class Pose2DNode(LifecycleNode):
             old = self._rate_hz
             common = self._rig.common(auto.rate_hz, time.monotonic())
             # Snapped to this node's grid rates, so every camera computes the same period.
-            self._rate_hz = auto.fastest(common * (1 + 1e-9)) if common > 0 else 0.0
+            self._rate_hz = auto.fastest(common) if common > 0 else 0.0
             new, own = self._rate_hz, auto.rate_hz
         if new != old:
             what = f'{new:g} Hz' if new else 'every image'
