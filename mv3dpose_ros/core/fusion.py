@@ -39,7 +39,7 @@ the working volume and two-view "ghost" pairings from becoming tracks. Existing 
 updated by any candidate.
 
 Units: thresholds on image distances are in normalised image units (pixels / focal length;
-0.025 = 25 px at f = 1000 px), 3D distances in metres, times in seconds (field names say so).
+0.045 = 45 px at f = 1000 px), 3D distances in metres, times in seconds (field names say so).
 """
 
 from dataclasses import asdict, dataclass
@@ -78,7 +78,7 @@ class FusionConfig:
     min_joint_confidence: float = 0.1       # keypoints below this count as missing
     min_pose_joints: int = 4                # 2D poses with fewer visible joints are ignored
     # association (paper: theta)
-    epipolar_threshold_norm: float = 0.025  # mean symmetric epipolar distance gate
+    epipolar_threshold_norm: float = 0.045  # mean symmetric epipolar distance gate
     min_shared_joints: int = 3              # joints two views must share for a valid cost
     max_reference_views: int = 4            # member views per candidate used in the cost
     min_views: int = 2                      # cameras a candidate needs to be triangulated
