@@ -83,7 +83,7 @@ def _load_frames(cameras: List[str]) -> Dict[str, List[np.ndarray]]:
 
 def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider: str,
         pose2d_params: List[str], warmup_s: float, verbose: bool,
-        fusion_params: List[str] = ()) -> dict:
+        fusion_params: List[str] = (), latency_log: str = '') -> dict:
     """Start bringup, play the cameras, collect tracks and diagnostics; return the figures."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -220,6 +220,12 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
                     break
                 ex.spin_once(timeout_sec=min(left, 0.005))
         window = time.monotonic() - measure_from
+        if latency_log:
+            with open(latency_log, 'w') as out:
+                out.write('# tracks receipt [s since the epoch], capture -> tracks [ms], '
+                          'time point, people observed\n')
+                for at, ms, (point, seen) in zip(arrivals, latency, observed):
+                    out.write(f'{at / 1e9:.3f} {ms:.1f} {point} {seen}\n')
         sets_published = published - published_at_start
         end = time.monotonic() + 1.5             # let the last diagnostics arrive
         while time.monotonic() < end:
@@ -308,6 +314,9 @@ def main() -> int:
     parser.add_argument('--pose2d-param', action='append', default=[], metavar='NAME:=VALUE')
     parser.add_argument('--fusion-param', action='append', default=[], metavar='NAME:=VALUE')
     parser.add_argument('--verbose', action='store_true', help='print every diagnostic status')
+    parser.add_argument('--latency-log', metavar='FILE', default='',
+                        help='write each measured tracks message (receipt, latency, time point, '
+                             'people) to FILE (the last run of several)')
     args = parser.parse_args()
     if not os.path.isdir(DATA):
         print(f'bench_pipeline: skipped: no frames at {DATA}')
@@ -327,7 +336,8 @@ def main() -> int:
                 continue
             try:
                 _print(run(cams, args.rate, args.seconds, args.hold_s, provider,
-                           args.pose2d_param, args.warmup, args.verbose, args.fusion_param))
+                           args.pose2d_param, args.warmup, args.verbose, args.fusion_param,
+                           args.latency_log))
             except RuntimeError as exc:
                 print(f'{n} cam, {provider}: failed: {exc}', flush=True)
     print(f'bench_pipeline: load at the end {os.getloadavg()}')

@@ -103,12 +103,27 @@ RIG_AUTO_RATES_HZ = tuple(sorted(
 #: chosen at AUTO_MARGIN of what the node can infer, the next faster one (or every image) is
 #: taken only below AUTO_UP: the band in between is the hysteresis.
 AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
+#: Auto mode: a larger input is taken only below AUTO_UP_SIZE of the frame period (estimated
+#: from the pixel ratio). Stricter than AUTO_UP: a larger input also slows the other cameras
+#: sharing the cores, which a node's own measurement does not show.
+AUTO_UP_SIZE = 0.45
 #: Auto mode: a grid rate needing up to AUTO_GENTLE of its period steps down one rate only (a
 #: mild overload, often one noisy measurement); above it, straight to AUTO_MARGIN.
 AUTO_GENTLE = 1.2
 #: Auto mode: processing times kept (median), needed since the last change, and the least time
 #: a rate is kept [s].
 AUTO_WINDOW, AUTO_MIN_SAMPLES, AUTO_DWELL_S = 9, 3, 3.0
+#: Auto mode: the least time a choice is kept before a step *up* (faster rate, every image, a
+#: larger input) [s]. Longer than AUTO_DWELL_S: the cameras of one machine share its cores, so
+#: just after they all stepped down each one measures a quiet machine and would step back up
+#: at once, overloading it again. A step up undone within AUTO_UP_HELD_S doubles the wait
+#: before the next one (up to AUTO_UP_DWELL_MAX_S); one that holds resets it.
+AUTO_UP_DWELL_S, AUTO_UP_HELD_S, AUTO_UP_DWELL_MAX_S = 10.0, 30.0, 160.0
+#: A grid no faster than the camera selects nothing: with the camera's frame period at least
+#: GRID_IDLE_RATIO of the grid period, every image is inferred. On a grid of the camera's own
+#: rate, stamp jitter at the window boundaries would put two images in one window and none in
+#: the next, and the fusion node would wait for the missing camera.
+GRID_IDLE_RATIO = 0.9
 #: Auto mode across a rig: a rate announced on ``rig_rate_topic`` holds the rig back for this
 #: long after it was heard [s] (announced every RIG_RATE_PERIOD_S and at each change).
 RIG_RATE_TTL_S, RIG_RATE_PERIOD_S = 3.0, 1.0
@@ -158,6 +173,19 @@ def on_new_window(stamp_ns: int, last_ns: Optional[int], period_ns: int) -> bool
     return not (window == last or 0 < (last - window) * period_ns < NS_PER_S)
 
 
+def frame_period_ns(taken: Sequence[Tuple[int, int, int]]) -> Optional[float]:
+    """
+    Return the camera's frame period from images taken, None until one step is known.
+
+    ``taken``: ``(arrival ns, header stamp ns, camera images since the previous take)``,
+    oldest first; the median over the last 16 stamp steps, each divided by its image count.
+    """
+    taken = list(taken)[-17:]
+    steps = [(s1 - s0) // f1 for (_, s0, _), (_, s1, f1) in zip(taken, taken[1:])
+             if f1 >= 1 and 0 < s1 - s0 < NS_PER_S]
+    return statistics.median(steps) if steps else None
+
+
 class AutoInferenceRate:
     """
     ``inference_rate_hz`` auto: the input size and grid rate one camera's node can sustain.
@@ -169,17 +197,20 @@ class AutoInferenceRate:
     - while the node keeps up (also when it is slow but nothing is replaced: a player that
       waits for the output), every image at the largest input size;
     - once the camera outpaces it (images replaced), first a smaller input size of ``sizes``
-      (the ladder of ``size_ladder``, down to ``model.min_input_side``), then the fastest of
+      (the ladder of ``size_ladder``, down to ``model.min_input_side``; the largest one whose
+      time, estimated from the pixel ratio, fits ``AUTO_MARGIN``), then the fastest of
       ``rates`` (``AUTO_RATES_HZ``; ``RIG_AUTO_RATES_HZ`` in a rig sharing one rate) at
       ``AUTO_MARGIN`` of what it can infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
-      estimated from the pixel ratio) only when that stays below ``AUTO_UP``; down as soon as
+      estimated from the pixel ratio) only when that stays below ``AUTO_UP`` (a larger size
+      below ``AUTO_UP_SIZE``); down as soon as
       the current step needs more than ``AUTO_DOWN`` of the frame period (one grid rate
       slower while it needs at most ``AUTO_GENTLE``, else at ``AUTO_MARGIN`` at once).
 
-    A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, so it
-    follows the load but does not flap. ``rate_hz`` (0: every image) and ``size`` are the
-    current choice, ``reason`` says why it was made.
+    A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, and for
+    ``AUTO_UP_DWELL_S`` before a step up, so it follows the load but does not flap.
+    ``rate_hz`` (0: every image) and ``size`` are the current choice, ``reason`` says why it
+    was made.
     """
 
     def __init__(self, sizes: Sequence[Tuple[int, int]] = (),
@@ -193,6 +224,8 @@ class AutoInferenceRate:
         self._last_stamp: Optional[int] = None
         self._replaced = 0                    # images replaced before inference since a change
         self._changed_s: Optional[float] = None
+        self._up_s: Optional[float] = None    # when the last step up was taken
+        self.up_dwell_s = AUTO_UP_DWELL_S     # wait before a step up (backs off, see update)
         self.reason = 'every image (no measurement yet)'
 
     @property
@@ -250,25 +283,36 @@ class AutoInferenceRate:
         cap = 1.0 / proc
         rate, index = self.rate_hz, self.size_index
         smaller = index + 1 < len(self.sizes)
+        if self._up_s is not None and now_s - self._up_s >= AUTO_UP_HELD_S:
+            self._up_s, self.up_dwell_s = None, AUTO_UP_DWELL_S     # the last step up held
+        up = now_s - self._changed_s >= self.up_dwell_s
         if rate == 0.0:
             if fps * proc > AUTO_DOWN and self._replaced >= AUTO_MIN_SAMPLES:
                 if smaller:
-                    index += 1
+                    index = next((j for j in range(index + 1, len(self.sizes))
+                                  if fps * proc * self._pixel_ratio(j) <= AUTO_MARGIN),
+                                 len(self.sizes) - 1)
                 else:
                     rate = self.fastest(AUTO_MARGIN * cap)
-            elif index > 0 and fps * proc * self._pixel_ratio(index - 1) <= AUTO_UP:
+            elif up and index > 0 and fps * proc * self._pixel_ratio(index - 1) <= AUTO_UP_SIZE:
                 index -= 1
         elif rate * proc > AUTO_DOWN:
             slower = next((r for r in self.rates if r < rate), rate)
             rate = slower if rate * proc <= AUTO_GENTLE else self.fastest(AUTO_MARGIN * cap)
-        elif fps * proc <= AUTO_UP:
+        elif up and fps * proc <= AUTO_UP:
             rate = 0.0
-        else:
+        elif up:
             faster = next((r for r in reversed(self.rates) if r > rate), rate)
             if faster * proc <= AUTO_UP and faster < fps:
                 rate = faster
         if (rate, index) == (self.rate_hz, self.size_index):
             return False
+        faster = rate > self.rate_hz > 0 or rate == 0 < self.rate_hz   # a rate, or every image
+        if index < self.size_index or faster:
+            self._up_s = now_s
+        elif self._up_s is not None:         # down again soon after a step up: back off
+            self._up_s = None
+            self.up_dwell_s = min(AUTO_UP_DWELL_MAX_S, 2 * self.up_dwell_s)
         self.rate_hz, self.size_index = rate, index
         self._changed_s = now_s
         self._proc_s.clear()
@@ -360,11 +404,12 @@ PARAMETERS = {
                                  'outpaces inference. N or HxW: that size, fixed; empty: the '
                                  "model's default. For models with dynamic input it sets the "
                                  'size', False),
-    'model.min_input_side': (512, 'smallest long side of the input that model.input_size auto '
-                                  'steps down to under load (512: 288x512 for 16:9 images, the '
-                                  'smallest that kept every person on the Panoptic frames; 384 '
-                                  'allows 224x384); a value above the chosen size keeps it fixed',
-                             False),
+    'model.min_input_side': (320, 'smallest long side of the input that model.input_size auto '
+                                  'steps down to under load (320: 192x320 for 16:9 images, which '
+                                  'still finds every person on the Panoptic frames with 4 '
+                                  'cameras, at about twice the keypoint noise of 384x640; 512 '
+                                  'stops at 288x512); a value above the chosen size keeps it '
+                                  'fixed', False),
     'model.cache_dir': ('', 'model cache (empty = $MV3DPOSE_MODEL_DIR or '
                             '~/.cache/mv3dpose/models)', False),
     'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
@@ -704,6 +749,21 @@ class Pose2DNode(LifecycleNode):
         super().destroy_node()
 
     # -- data path ------------------------------------------------------------------------------
+    def _grid_selects(self) -> bool:
+        """Tell whether the grid rate skips images: one is set and the camera is faster."""
+        if self._rate_hz <= 0:
+            return False
+        frame = frame_period_ns(self._taken)
+        return frame is None or frame < GRID_IDLE_RATIO * grid_period_ns(self._rate_hz)
+
+    def _rate_label(self) -> Union[float, str]:
+        """Return the grid rate in use for /diagnostics, or what replaces it."""
+        with self._cv:
+            if self._grid_selects():
+                return self._rate_hz
+            return f'{self._rate_hz:g}: every image (camera not faster)' if self._rate_hz \
+                else 'every image'
+
     def _on_grid(self, stamp: Optional[int]) -> bool:
         """Tell whether an image opens a new inference_rate_hz window of header stamps."""
         if stamp is None or stamp <= 0:
@@ -747,7 +807,7 @@ class Pose2DNode(LifecycleNode):
             self.taken += 1
             self._last_input_ns = now
             self._in_freq.tick(frames)
-            if self._rate_hz > 0:
+            if self._grid_selects():
                 self.skipped += untaken
                 if not self._on_grid(stamp):
                     self.skipped += 1
@@ -777,11 +837,10 @@ class Pose2DNode(LifecycleNode):
         with self._cv:
             rate, last = self._rate_hz, self._grid_stamp
             taken = list(self._taken)
-        steps = [(s1 - s0) // f1 for (_, s0, _), (_, s1, f1) in zip(taken, taken[1:])
-                 if f1 >= 1 and 0 < s1 - s0 < NS_PER_S]        # camera frame periods
-        if rate <= 0 or last is None or not steps:
+            selects = self._grid_selects()
+        frame_ns = frame_period_ns(taken)
+        if not selects or last is None or frame_ns is None:
             return 0.0
-        frame_ns = statistics.median(steps[-16:])
         (w0, s0, _), (w1, s1, _) = taken[0], taken[-1]
         period = grid_period_ns(rate)
         start = (last // period + 1) * period             # stamp opening the next window
@@ -1059,7 +1118,7 @@ class Pose2DNode(LifecycleNode):
                   'Skipped (inference_rate_hz grid)': self.skipped,
                   'Inference rate mode': ('auto' if self._auto is not None else
                                           'fixed' if self._rate_hz else 'every image'),
-                  'Inference rate (Hz)': self._rate_hz or 'every image',
+                  'Inference rate (Hz)': self._rate_label(),
                   'Inference rate, own choice (auto)': (
                       'n/a' if self._auto is None else self._auto.rate_hz or 'every image'),
                   'Inference rate, rig slowest (auto)': (

@@ -94,7 +94,7 @@ MODELS: Dict[str, ModelSpec] = {
         # 640x640 default; fitted to 16:9 and portrait images; smaller fitted inputs that
         # inference_rate_hz auto steps down to when the camera outpaces inference.
         sizes=((640, 640), (384, 640), (640, 384), (288, 512), (512, 288), (224, 384),
-               (384, 224)), size_multiple=32,
+               (384, 224), (192, 320), (320, 192)), size_multiple=32,
         tools=('torch==2.13.0', 'ultralytics==8.4.190', 'onnx==1.23.2', 'onnxslim==0.1.98'),
         constraints=(
             'anyio==4.16.0', 'certifi==2026.10.18',
