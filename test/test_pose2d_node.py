@@ -273,7 +273,7 @@ def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
         assert len(frame().persons) == 1
         assert tuple(node.estimator.input_size) == (384, 640)
         assert node._ladder == [(384, 640), (288, 512), (224, 384), (192, 320)]
-        # A camera at 10 Hz, 100 ms per image and images replaced: one step down per dwell
+        # A camera at 10 Hz, 110 ms per image and images replaced: one step down per dwell
         # (0.6 of the pixels is estimated to fit at most 0.7 of the frame period).
         auto, clock = node._auto, 0.0
         for expected in [(288, 512), (224, 384), (192, 320)]:
@@ -281,7 +281,7 @@ def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
                 clock += 0.1
                 auto.add_stamp(int(clock * NS))
                 auto.add_replaced()
-                auto.add_processing(0.1)
+                auto.add_processing(0.11)
                 if auto.update(clock):
                     break
             out = frame()
@@ -830,6 +830,30 @@ def test_auto_mode_backs_off_a_step_up_that_overloads():
     # where a step up holds (30 s), the wait is back to the base
     run({(224, 384): 0.05, (192, 320): 0.03}, 400)
     assert auto.size == (224, 384) and auto.up_dwell_s == AUTO_UP_DWELL_S
+
+
+def test_auto_mode_rides_out_a_burst_but_not_an_overload():
+    """Every image at 10 Hz: a second of slow images is a burst, three seconds an overload."""
+    from mv3dpose_ros.nodes.pose2d_node import AutoInferenceRate
+    auto = AutoInferenceRate()
+    t = 0.0
+
+    def run(seconds, proc):
+        nonlocal t
+        changed = False
+        for _ in range(int(seconds * 10)):
+            t += 0.1
+            auto.add_stamp(int(1000 * NS + t * NS))
+            if proc > 0.1:
+                auto.add_replaced()
+            auto.add_processing(proc, t)
+            changed |= auto.update(t)
+        return changed
+
+    assert not run(10.0, 0.05)
+    assert not run(1.2, 0.3) and auto.rate_hz == 0.0      # a burst: 12 of 30 slow
+    assert not run(5.0, 0.05)
+    assert run(3.0, 0.3) and auto.rate_hz > 0.0           # sustained: a grid rate
 
 
 def test_size_ladder_keeps_the_most_detail_per_step():

@@ -103,6 +103,10 @@ RIG_AUTO_RATES_HZ = tuple(sorted(
 #: chosen at AUTO_MARGIN of what the node can infer, the next faster one (or every image) is
 #: taken only below AUTO_UP: the band in between is the hysteresis.
 AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
+#: Auto mode, every image: leave it (smaller input, then a grid rate) only when one image
+#: takes more than AUTO_DOWN_EVERY of the frame period. Near 1.0 an image is dropped now and
+#: then (newest kept, counted); a grid rate costs a third or more of the rate for 10 s at least.
+AUTO_DOWN_EVERY = 1.0
 #: Auto mode: a larger input is taken only below AUTO_UP_SIZE of the frame period (estimated
 #: from the pixel ratio). Stricter than AUTO_UP: a larger input also slows the other cameras
 #: sharing the cores, which a node's own measurement does not show.
@@ -111,8 +115,10 @@ AUTO_UP_SIZE = 0.45
 #: mild overload, often one noisy measurement); above it, straight to AUTO_MARGIN.
 AUTO_GENTLE = 1.2
 #: Auto mode: processing times kept (median), needed since the last change, and the least time
-#: a rate is kept [s].
-AUTO_WINDOW, AUTO_MIN_SAMPLES, AUTO_DWELL_S = 9, 3, 3.0
+#: a rate is kept [s]. The median is over the last AUTO_WINDOW times or, when more, those of
+#: the last AUTO_WINDOW_S: at 10 images/s a second of slow images (another process's burst)
+#: is then not yet an overload.
+AUTO_WINDOW, AUTO_MIN_SAMPLES, AUTO_DWELL_S, AUTO_WINDOW_S = 9, 3, 3.0, 3.0
 #: Auto mode: the least time a choice is kept before a step *up* (faster rate, every image, a
 #: larger input) [s]. Longer than AUTO_DWELL_S: the cameras of one machine share its cores, so
 #: just after they all stepped down each one measures a quiet machine and would step back up
@@ -203,9 +209,10 @@ class AutoInferenceRate:
       ``AUTO_MARGIN`` of what it can infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP`` (a larger size
-      below ``AUTO_UP_SIZE``); down as soon as
-      the current step needs more than ``AUTO_DOWN`` of the frame period (one grid rate
-      slower while it needs at most ``AUTO_GENTLE``, else at ``AUTO_MARGIN`` at once).
+      below ``AUTO_UP_SIZE``); down as soon as the current step needs more than
+      ``AUTO_DOWN`` of the grid period (``AUTO_DOWN_EVERY`` of the camera's frame period when
+      inferring every image; one grid rate slower while it needs at most ``AUTO_GENTLE``,
+      else at ``AUTO_MARGIN`` at once).
 
     A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, and for
     ``AUTO_UP_DWELL_S`` before a step up, so it follows the load but does not flap.
@@ -219,7 +226,7 @@ class AutoInferenceRate:
         self.rates = tuple(sorted(rates, reverse=True))
         self.sizes: List[Tuple[int, int]] = [tuple(s) for s in sizes]   # largest first
         self.size_index = 0
-        self._proc_s: Deque[float] = deque(maxlen=AUTO_WINDOW)
+        self._proc_s: Deque[Tuple[Optional[float], float]] = deque(maxlen=120)
         self._steps_ns: Deque[int] = deque(maxlen=16)
         self._last_stamp: Optional[int] = None
         self._replaced = 0                    # images replaced before inference since a change
@@ -248,10 +255,10 @@ class AutoInferenceRate:
         """Record images replaced by a newer one before inference."""
         self._replaced += count
 
-    def add_processing(self, seconds: float) -> None:
-        """Record the time the node spent on one processed image."""
+    def add_processing(self, seconds: float, now_s: Optional[float] = None) -> None:
+        """Record the time the node spent on one processed image (done at ``now_s``)."""
         if math.isfinite(seconds) and seconds > 0:
-            self._proc_s.append(seconds)
+            self._proc_s.append((now_s, seconds))
 
     @property
     def input_hz(self) -> float:
@@ -263,7 +270,13 @@ class AutoInferenceRate:
     @property
     def processing_s(self) -> float:
         """Median time per processed image since the last change (NaN when unknown)."""
-        return statistics.median(self._proc_s) if self._proc_s else math.nan
+        if not self._proc_s:
+            return math.nan
+        newest = self._proc_s[-1][0]
+        recent = [] if newest is None else [
+            p for t, p in self._proc_s if t is not None and newest - t <= AUTO_WINDOW_S]
+        last = [p for _, p in list(self._proc_s)[-AUTO_WINDOW:]]
+        return statistics.median(recent if len(recent) > len(last) else last)
 
     def _pixel_ratio(self, index: int) -> float:
         """Return pixels of ``sizes[index]`` over those of the size in use."""
@@ -287,7 +300,7 @@ class AutoInferenceRate:
             self._up_s, self.up_dwell_s = None, AUTO_UP_DWELL_S     # the last step up held
         up = now_s - self._changed_s >= self.up_dwell_s
         if rate == 0.0:
-            if fps * proc > AUTO_DOWN and self._replaced >= AUTO_MIN_SAMPLES:
+            if fps * proc > AUTO_DOWN_EVERY and self._replaced >= AUTO_MIN_SAMPLES:
                 if smaller:
                     index = next((j for j in range(index + 1, len(self.sizes))
                                   if fps * proc * self._pixel_ratio(j) <= AUTO_MARGIN),
@@ -909,7 +922,7 @@ class Pose2DNode(LifecycleNode):
             auto = self._auto
             if auto is None:
                 return
-            auto.add_processing(seconds)
+            auto.add_processing(seconds, time.monotonic())
             old_rate, old_size = auto.rate_hz, auto.size
             if not auto.update(time.monotonic()):
                 return
