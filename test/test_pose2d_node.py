@@ -273,7 +273,7 @@ def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
         assert len(frame().persons) == 1
         assert tuple(node.estimator.input_size) == (384, 640)
         assert node._ladder == [(384, 640), (288, 512), (224, 384), (192, 320)]
-        # A camera at 10 Hz, 110 ms per image and images replaced: one step down per dwell
+        # A camera at 10 Hz, 100 ms per image and images replaced: one step down per dwell
         # (0.6 of the pixels is estimated to fit at most 0.7 of the frame period).
         auto, clock = node._auto, 0.0
         for expected in [(288, 512), (224, 384), (192, 320)]:
@@ -281,7 +281,7 @@ def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
                 clock += 0.1
                 auto.add_stamp(int(clock * NS))
                 auto.add_replaced()
-                auto.add_processing(0.11)
+                auto.add_processing(0.1)
                 if auto.update(clock):
                     break
             out = frame()

@@ -103,10 +103,6 @@ RIG_AUTO_RATES_HZ = tuple(sorted(
 #: chosen at AUTO_MARGIN of what the node can infer, the next faster one (or every image) is
 #: taken only below AUTO_UP: the band in between is the hysteresis.
 AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
-#: Auto mode, every image: leave it (smaller input, then a grid rate) only when one image
-#: takes more than AUTO_DOWN_EVERY of the frame period. Near 1.0 an image is dropped now and
-#: then (newest kept, counted); a grid rate costs a third or more of the rate for 10 s at least.
-AUTO_DOWN_EVERY = 1.0
 #: Auto mode: a larger input is taken only below AUTO_UP_SIZE of the frame period (estimated
 #: from the pixel ratio). Stricter than AUTO_UP: a larger input also slows the other cameras
 #: sharing the cores, which a node's own measurement does not show.
@@ -210,9 +206,8 @@ class AutoInferenceRate:
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP`` (a larger size
       below ``AUTO_UP_SIZE``); down as soon as the current step needs more than
-      ``AUTO_DOWN`` of the grid period (``AUTO_DOWN_EVERY`` of the camera's frame period when
-      inferring every image; one grid rate slower while it needs at most ``AUTO_GENTLE``,
-      else at ``AUTO_MARGIN`` at once).
+      ``AUTO_DOWN`` of the frame period (one grid rate slower while it needs at most
+      ``AUTO_GENTLE``, else at ``AUTO_MARGIN`` at once).
 
     A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, and for
     ``AUTO_UP_DWELL_S`` before a step up, so it follows the load but does not flap.
@@ -300,7 +295,7 @@ class AutoInferenceRate:
             self._up_s, self.up_dwell_s = None, AUTO_UP_DWELL_S     # the last step up held
         up = now_s - self._changed_s >= self.up_dwell_s
         if rate == 0.0:
-            if fps * proc > AUTO_DOWN_EVERY and self._replaced >= AUTO_MIN_SAMPLES:
+            if fps * proc > AUTO_DOWN and self._replaced >= AUTO_MIN_SAMPLES:
                 if smaller:
                     index = next((j for j in range(index + 1, len(self.sizes))
                                   if fps * proc * self._pixel_ratio(j) <= AUTO_MARGIN),
