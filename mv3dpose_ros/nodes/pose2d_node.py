@@ -221,6 +221,7 @@ class AutoInferenceRate:
         self.rates = tuple(sorted(rates, reverse=True))
         self.sizes: List[Tuple[int, int]] = [tuple(s) for s in sizes]   # largest first
         self.size_index = 0
+        # (done at [s], seconds): AUTO_WINDOW_S at up to 40 images/s
         self._proc_s: Deque[Tuple[Optional[float], float]] = deque(maxlen=120)
         self._steps_ns: Deque[int] = deque(maxlen=16)
         self._last_stamp: Optional[int] = None
@@ -315,8 +316,8 @@ class AutoInferenceRate:
                 rate = faster
         if (rate, index) == (self.rate_hz, self.size_index):
             return False
-        faster = rate > self.rate_hz > 0 or rate == 0 < self.rate_hz   # a rate, or every image
-        if index < self.size_index or faster:
+        stepped_up = index < self.size_index or rate > self.rate_hz > 0 or rate == 0 < self.rate_hz
+        if stepped_up:                       # a larger input, a faster rate or every image
             self._up_s = now_s
         elif self._up_s is not None:         # down again soon after a step up: back off
             self._up_s = None
@@ -415,9 +416,9 @@ PARAMETERS = {
     'model.min_input_side': (320, 'smallest long side of the input that model.input_size auto '
                                   'steps down to under load (320: 192x320 for 16:9 images, which '
                                   'still finds every person on the Panoptic frames with 4 '
-                                  'cameras, at about twice the keypoint noise of 384x640; 512 '
-                                  'stops at 288x512); a value above the chosen size keeps it '
-                                  'fixed', False),
+                                  'cameras, its keypoints about 18 px off those of 640x640; 512 '
+                                  'stops at 288x512, 10 px); a value above the chosen size keeps '
+                                  'it fixed', False),
     'model.cache_dir': ('', 'model cache (empty = $MV3DPOSE_MODEL_DIR or '
                             '~/.cache/mv3dpose/models)', False),
     'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
