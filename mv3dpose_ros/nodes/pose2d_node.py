@@ -188,6 +188,13 @@ def frame_period_ns(taken: Sequence[Tuple[int, int, int]]) -> Optional[float]:
     return statistics.median(steps) if steps else None
 
 
+def grid_selects(rate_hz: float, frame_ns: Optional[float]) -> bool:
+    """Tell whether a grid rate skips images: one is set and the camera (if known) is faster."""
+    if rate_hz <= 0:
+        return False
+    return frame_ns is None or frame_ns < GRID_IDLE_RATIO * grid_period_ns(rate_hz)
+
+
 class AutoInferenceRate:
     """
     ``inference_rate_hz`` auto: the input size and grid rate one camera's node can sustain.
@@ -760,10 +767,7 @@ class Pose2DNode(LifecycleNode):
     # -- data path ------------------------------------------------------------------------------
     def _grid_selects(self) -> bool:
         """Tell whether the grid rate skips images: one is set and the camera is faster."""
-        if self._rate_hz <= 0:
-            return False
-        frame = frame_period_ns(self._taken)
-        return frame is None or frame < GRID_IDLE_RATIO * grid_period_ns(self._rate_hz)
+        return grid_selects(self._rate_hz, frame_period_ns(self._taken))
 
     def _rate_label(self) -> Union[float, str]:
         """Return the grid rate in use for /diagnostics, or what replaces it."""
@@ -846,9 +850,8 @@ class Pose2DNode(LifecycleNode):
         with self._cv:
             rate, last = self._rate_hz, self._grid_stamp
             taken = list(self._taken)
-            selects = self._grid_selects()
         frame_ns = frame_period_ns(taken)
-        if not selects or last is None or frame_ns is None:
+        if not grid_selects(rate, frame_ns) or last is None or frame_ns is None:
             return 0.0
         (w0, s0, _), (w1, s1, _) = taken[0], taken[-1]
         period = grid_period_ns(rate)
