@@ -774,12 +774,11 @@ def test_auto_mode_shrinks_the_input_before_the_rate_and_grows_it_back():
         for _ in range(n):
             proc = cost[auto.size] * load
             for _ in range(int(fps)):
-                auto.add_stamp(int(1000 * NS + t * NS))
+                auto.add_stamp(int(1000 * NS + t * NS), 1, t)
                 t += 1.0 / fps
             if auto.rate_hz == 0.0:
-                for _ in range(max(0, int(fps) - int(1.0 / proc))):
-                    auto.add_replaced()
-            auto.add_processing(proc)
+                auto.add_replaced(max(0, int(fps) - int(1.0 / proc)), t)
+            auto.add_processing(proc, t)
             if auto.update(t):
                 seen.append((auto.size, auto.rate_hz))
         return seen
@@ -843,9 +842,9 @@ def test_auto_mode_rides_out_a_burst_but_not_an_overload():
         changed = False
         for _ in range(int(seconds * 10)):
             t += 0.1
-            auto.add_stamp(int(1000 * NS + t * NS))
+            auto.add_stamp(int(1000 * NS + t * NS), 1, t)
             if proc > 0.1:
-                auto.add_replaced()
+                auto.add_replaced(1, t)
             auto.add_processing(proc, t)
             changed |= auto.update(t)
         return changed
@@ -854,6 +853,37 @@ def test_auto_mode_rides_out_a_burst_but_not_an_overload():
     assert not run(1.2, 0.3) and auto.rate_hz == 0.0      # a burst: 12 of 30 slow
     assert not run(5.0, 0.05)
     assert run(3.0, 0.3) and auto.rate_hz > 0.0           # sustained: a grid rate
+
+
+def test_auto_mode_at_the_smallest_input_keeps_every_image_while_few_are_lost():
+    """
+    A machine at its edge: images take about the frame period, a few are replaced.
+
+    A grid would infer 2 images in 3; the node inferring more than 3 in 4 stays on every image
+    and takes a grid only once it loses more (the images of the last 3 s count).
+    """
+    from mv3dpose_ros.nodes.pose2d_node import AUTO_LOSS, AutoInferenceRate
+    auto = AutoInferenceRate()
+    t = 0.0
+
+    def run(seconds, proc, lost_every):
+        nonlocal t
+        for k in range(int(seconds * 10)):
+            t += 0.1
+            auto.add_stamp(int(1000 * NS + t * NS), 1, t)
+            if k % lost_every == 0:
+                auto.add_replaced(1, t)
+            auto.add_processing(proc, t)
+            if auto.update(t):
+                return True
+        return False
+
+    assert not run(20.0, 0.095, 10) and auto.rate_hz == 0.0     # 10 % lost: every image
+    assert auto.loss == pytest.approx(0.1, abs=0.02)
+    assert not run(20.0, 0.095, 5) and auto.rate_hz == 0.0      # 20 %: still
+    assert 0.2 < 1 / 3 > AUTO_LOSS
+    assert run(4.0, 0.095, 3) and auto.rate_hz == pytest.approx(5.0)   # 1 in 3: a grid
+    assert auto.loss == 0.0                                      # counted anew after a change
 
 
 def test_size_ladder_keeps_the_most_detail_per_step():

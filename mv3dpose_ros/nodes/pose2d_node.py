@@ -107,6 +107,12 @@ AUTO_DOWN, AUTO_MARGIN, AUTO_UP = 0.9, 0.7, 0.6
 #: from the pixel ratio). Stricter than AUTO_UP: a larger input also slows the other cameras
 #: sharing the cores, which a node's own measurement does not show.
 AUTO_UP_SIZE = 0.45
+#: Auto mode, at the smallest input: every image is left for a grid rate only when more than
+#: AUTO_LOSS of the camera's images of the last AUTO_WINDOW_S were not inferred (replaced by a
+#: newer one while the model was busy). A grid gives the rig common instants but infers only
+#: its rate's share of the images (2/3 on the grid below 10 Hz); a node that infers 3 images
+#: in 4 of a 10 Hz camera, on a busy moment of a machine at its edge, gives the rig more sets.
+AUTO_LOSS = 0.25
 #: Auto mode: a grid rate needing up to AUTO_GENTLE of its period steps down one rate only (a
 #: mild overload, often one noisy measurement); above it, straight to AUTO_MARGIN.
 AUTO_GENTLE = 1.2
@@ -207,9 +213,10 @@ class AutoInferenceRate:
       waits for the output), every image at the largest input size;
     - once the camera outpaces it (images replaced), first a smaller input size of ``sizes``
       (the ladder of ``size_ladder``, down to ``model.min_input_side``; the largest one whose
-      time, estimated from the pixel ratio, fits ``AUTO_MARGIN``), then the fastest of
-      ``rates`` (``AUTO_RATES_HZ``; ``RIG_AUTO_RATES_HZ`` in a rig sharing one rate) at
-      ``AUTO_MARGIN`` of what it can infer;
+      time, estimated from the pixel ratio, fits ``AUTO_MARGIN``), then, once more than
+      ``AUTO_LOSS`` of the images go uninferred, the fastest of ``rates`` (``AUTO_RATES_HZ``;
+      ``RIG_AUTO_RATES_HZ`` in a rig sharing one rate) at ``AUTO_MARGIN`` of what it can
+      infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP`` (a larger size
       below ``AUTO_UP_SIZE``); down as soon as the current step needs more than
@@ -233,6 +240,8 @@ class AutoInferenceRate:
         self._steps_ns: Deque[int] = deque(maxlen=16)
         self._last_stamp: Optional[int] = None
         self._replaced = 0                    # images replaced before inference since a change
+        # (at [s], camera images, of them replaced) since a change: AUTO_WINDOW_S at 80 Hz
+        self._images: Deque[Tuple[Optional[float], int, int]] = deque(maxlen=512)
         self._changed_s: Optional[float] = None
         self._up_s: Optional[float] = None    # when the last step up was taken
         self.up_dwell_s = AUTO_UP_DWELL_S     # wait before a step up (backs off, see update)
@@ -248,15 +257,32 @@ class AutoInferenceRate:
         self.sizes = [tuple(s) for s in sizes]
         self.size_index = 0
 
-    def add_stamp(self, stamp_ns: int, frames: int = 1) -> None:
+    def add_stamp(self, stamp_ns: int, frames: int = 1, now_s: Optional[float] = None) -> None:
         """Record the header stamp of a taken image, ``frames`` camera images after the last."""
         last, self._last_stamp = self._last_stamp, stamp_ns
         if last is not None and frames >= 1 and 0 < stamp_ns - last < 10 * NS_PER_S:
             self._steps_ns.append((stamp_ns - last) // frames)
+        if frames >= 1:
+            self._images.append((now_s, frames, 0))
 
-    def add_replaced(self, count: int = 1) -> None:
+    def add_replaced(self, count: int = 1, now_s: Optional[float] = None) -> None:
         """Record images replaced by a newer one before inference."""
         self._replaced += count
+        if count >= 1:
+            self._images.append((now_s, 0, count))
+
+    @property
+    def loss(self) -> float:
+        """
+        Share of the camera's images not inferred (replaced) since the last change.
+
+        Over the last ``AUTO_WINDOW_S`` when the records are timed; 0 while none is known.
+        """
+        newest = self._images[-1][0] if self._images else None
+        recent = [(n, r) for t, n, r in self._images
+                  if newest is None or (t is not None and newest - t <= AUTO_WINDOW_S)]
+        images = sum(n for n, _ in recent)
+        return min(1.0, sum(r for _, r in recent) / images) if images else 0.0
 
     def add_processing(self, seconds: float, now_s: Optional[float] = None) -> None:
         """Record the time the node spent on one processed image (done at ``now_s``)."""
@@ -308,7 +334,7 @@ class AutoInferenceRate:
                     index = next((j for j in range(index + 1, len(self.sizes))
                                   if fps * proc * self._pixel_ratio(j) <= AUTO_MARGIN),
                                  len(self.sizes) - 1)
-                else:
+                elif self.loss > AUTO_LOSS:
                     rate = self.fastest(AUTO_MARGIN * cap)
             elif up and index > 0 and fps * proc * self._pixel_ratio(index - 1) <= AUTO_UP_SIZE:
                 index -= 1
@@ -332,6 +358,7 @@ class AutoInferenceRate:
         self.rate_hz, self.size_index = rate, index
         self._changed_s = now_s
         self._proc_s.clear()
+        self._images.clear()
         self._replaced = 0
         self.reason = (f'images at {fps:.2f} Hz, {proc * 1e3:.0f} ms per image (at most '
                        f'{cap:.2f} Hz)')
@@ -457,6 +484,7 @@ PARAMETERS = {
     'no_input_timeout_s': (5.0, '[DYNAMIC] WARN when no image arrived for this long [s]', True),
     'inference_rate_hz': (-1.0, '[DYNAMIC] -1 or auto: every image while the node keeps up; '
                                 'when images come faster than it infers, a smaller input, then '
+                                '(once over a quarter of the images go uninferred) '
                                 "a grid rate it can sustain (measured; the slowest camera's "
                                 'for the whole rig, see rig_rate_topic), so the cameras of a '
                                 'rig infer common instants; 0: infer the newest image whenever '
@@ -814,7 +842,7 @@ class Pose2DNode(LifecycleNode):
             stamp = header_stamp_ns(msg)
             if stamp is not None and stamp > 0:
                 if self._auto is not None:
-                    self._auto.add_stamp(stamp, frames)
+                    self._auto.add_stamp(stamp, frames, time.monotonic())
                 self._taken.append((arrived, stamp, frames))
             self.received += frames
             self.taken += 1
@@ -828,11 +856,11 @@ class Pose2DNode(LifecycleNode):
             else:
                 self.dropped += untaken
                 if self._auto is not None and untaken:
-                    self._auto.add_replaced(untaken)
+                    self._auto.add_replaced(untaken, time.monotonic())
             if self._pending is not None:
                 self.dropped += 1
                 if self._auto is not None:
-                    self._auto.add_replaced()
+                    self._auto.add_replaced(1, time.monotonic())
             self._pending, self._pending_ns = msg, arrived
             self._cv.notify()
 
