@@ -21,6 +21,7 @@ keypoints follow from the letterbox alone); the real-model test needs
 Every wait is bounded; nothing asserts on speed.
 """
 
+import math
 import os
 import subprocess
 import sys
@@ -534,6 +535,25 @@ def test_grid_no_faster_than_the_camera_infers_every_image(ros_context):
         assert node.skipped == 5 and node._rate_label() == 5.0
     finally:
         node.destroy_node()
+
+
+def test_frame_period_is_one_estimate_for_the_grid_and_the_auto_mode():
+    """A 1 Hz camera has a period (a 1.25 Hz grid infers its every image); pauses do not count."""
+    from mv3dpose_ros.nodes.pose2d_node import AutoInferenceRate, frame_period_ns, grid_selects
+    slow = [(None, 1000 * NS + k * NS, 1) for k in range(6)]
+    assert frame_period_ns(slow) == NS
+    assert not grid_selects(1.25, NS) and grid_selects(0.625, NS)
+    paused = slow + [(None, 1030 * NS, 1), (None, 1031 * NS, 1)]    # a 25 s stall, then 1 Hz
+    assert frame_period_ns(paused) == NS
+    skipped = [(None, 1000 * NS, 1), (None, 1000 * NS + 300_000_000, 3)]  # 2 never taken
+    assert frame_period_ns(skipped) == 100_000_000
+    assert frame_period_ns(skipped, min_steps=4) is None and frame_period_ns(slow[:1]) is None
+    auto = AutoInferenceRate()
+    for k in range(4):
+        auto.add_stamp(1000 * NS + k * NS)
+    assert math.isnan(auto.input_hz)                  # 3 steps: not yet
+    auto.add_stamp(1004 * NS)
+    assert auto.input_hz == pytest.approx(1.0)
 
 
 def test_grid_mode_dozes_until_the_next_window_is_due(ros_context):

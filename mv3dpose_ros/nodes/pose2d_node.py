@@ -181,17 +181,20 @@ def on_new_window(stamp_ns: int, last_ns: Optional[int], period_ns: int) -> bool
     return not (window == last or 0 < (last - window) * period_ns < NS_PER_S)
 
 
-def frame_period_ns(taken: Sequence[Tuple[int, int, int]]) -> Optional[float]:
+def frame_period_ns(taken: Sequence[Tuple[Any, int, int]],
+                    min_steps: int = 1) -> Optional[float]:
     """
-    Return the camera's frame period from images taken, None until one step is known.
+    Return the camera's frame period from images taken, None until ``min_steps`` are known.
 
-    ``taken``: ``(arrival ns, header stamp ns, camera images since the previous take)``,
-    oldest first; the median over the last 16 stamp steps, each divided by its image count.
+    ``taken``: ``(arrival, header stamp ns, camera images since the previous take)``, oldest
+    first (the arrival is not used); the median over the last 16 stamp steps, each divided by
+    its image count. Steps of 10 s or more (a pause, a stalled camera) and backwards are left
+    out; a camera slower than 0.1 Hz has no period.
     """
     taken = list(taken)[-17:]
     steps = [(s1 - s0) // f1 for (_, s0, _), (_, s1, f1) in zip(taken, taken[1:])
-             if f1 >= 1 and 0 < s1 - s0 < NS_PER_S]
-    return statistics.median(steps) if steps else None
+             if f1 >= 1 and 0 < s1 - s0 < 10 * NS_PER_S]
+    return statistics.median(steps) if len(steps) >= max(1, min_steps) else None
 
 
 def grid_selects(rate_hz: float, frame_ns: Optional[float]) -> bool:
@@ -237,8 +240,8 @@ class AutoInferenceRate:
         self.size_index = 0
         # (done at [s], seconds): AUTO_WINDOW_S at up to 40 images/s
         self._proc_s: Deque[Tuple[Optional[float], float]] = deque(maxlen=120)
-        self._steps_ns: Deque[int] = deque(maxlen=16)
-        self._last_stamp: Optional[int] = None
+        # (at [s], header stamp ns, camera images since the last): the camera's frame period
+        self._taken: Deque[Tuple[Optional[float], int, int]] = deque(maxlen=17)
         self._replaced = 0                    # images replaced before inference since a change
         # (at [s], camera images, of them replaced) since a change: AUTO_WINDOW_S at 80 Hz
         self._images: Deque[Tuple[Optional[float], int, int]] = deque(maxlen=512)
@@ -259,9 +262,7 @@ class AutoInferenceRate:
 
     def add_stamp(self, stamp_ns: int, frames: int = 1, now_s: Optional[float] = None) -> None:
         """Record the header stamp of a taken image, ``frames`` camera images after the last."""
-        last, self._last_stamp = self._last_stamp, stamp_ns
-        if last is not None and frames >= 1 and 0 < stamp_ns - last < 10 * NS_PER_S:
-            self._steps_ns.append((stamp_ns - last) // frames)
+        self._taken.append((now_s, stamp_ns, frames))
         if frames >= 1:
             self._images.append((now_s, frames, 0))
 
@@ -292,9 +293,8 @@ class AutoInferenceRate:
     @property
     def input_hz(self) -> float:
         """Camera rate from the median stamp step (NaN until 4 steps are known)."""
-        if len(self._steps_ns) < 4:
-            return math.nan
-        return NS_PER_S / statistics.median(self._steps_ns)
+        period = frame_period_ns(self._taken, min_steps=4)
+        return NS_PER_S / period if period else math.nan
 
     @property
     def processing_s(self) -> float:
