@@ -556,6 +556,34 @@ def test_frame_period_is_one_estimate_for_the_grid_and_the_auto_mode():
     assert auto.input_hz == pytest.approx(1.0)
 
 
+def test_grid_mode_counts_a_window_it_never_took_as_dropped(ros_context):
+    """Images the grid skips are skipped; a whole window lost while the model was busy dropped."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from rclpy.serialization import serialize_message
+    node = Pose2DNode(context=ros_context, namespace='/gridloss', parameter_overrides=[
+        Parameter('autostart', value=False), Parameter('inference_rate_hz', value=2.5)])
+    img = np.zeros((4, 4, 3), np.uint8)
+
+    def take(k, frames):                                # the 10 Hz camera's k-th image
+        stamp = 1000 * NS + k * 100_000_000
+        node._on_image(serialize_message(numpy_to_image(
+            img, Header(stamp=ns_to_stamp(stamp), frame_id='f'), 'bgr8')), frames)
+    try:
+        for k in range(8):                              # every image taken: 400 ms windows
+            take(k, 1)
+        assert (node.skipped, node.dropped) == (6, 1)   # 2 windows opened; 1 replaced pending
+        node._pending = None                            # the model took it
+        # images 8-15 never taken: the windows of 8-11 and 12-15 lost (one image each that
+        # would have been inferred: dropped; the other 6 skipped), 16 opens the next one
+        take(16, 9)
+        assert (node.skipped, node.dropped) == (6 + 6, 1 + 2)
+        assert node._grid_stamp == 1000 * NS + 1_600_000_000
+        take(17, 1)                                     # same window: skipped
+        assert (node.skipped, node.dropped) == (13, 3)
+    finally:
+        node.destroy_node()
+
+
 def test_grid_mode_dozes_until_the_next_window_is_due(ros_context):
     """Between windows the inference thread takes nothing; it wakes half a frame early."""
     from mv3dpose_ros.nodes.pose2d_node import Pose2DNode

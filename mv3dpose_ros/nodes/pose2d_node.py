@@ -814,6 +814,20 @@ class Pose2DNode(LifecycleNode):
         self._grid_stamp = stamp
         return True
 
+    def _missed_windows(self, stamp: Optional[int], untaken: int) -> int:
+        """
+        Return the grid windows none of whose images was taken, of ``untaken`` images.
+
+        Between the image that opened the last window and this one: those windows' first
+        images were lost (the model was busy for longer than a window), not skipped by the
+        grid, so they count as dropped.
+        """
+        last = self._grid_stamp
+        if not untaken or stamp is None or last is None or stamp <= last:
+            return 0
+        period = grid_period_ns(self._rate_hz)
+        return min(untaken, max(0, stamp // period - last // period - 1))
+
     def _on_taken(self, msg: bytes, info: Any) -> None:
         """Take one image from the intake; count the camera's images never taken before it."""
         seq = info.get('publication_sequence_number') if isinstance(info, dict) else None
@@ -830,6 +844,9 @@ class Pose2DNode(LifecycleNode):
                   arrived_ns: Optional[int] = None) -> None:
         """
         Keep only the newest image; count the ones it replaces as dropped.
+
+        On a grid, untaken images of windows already inferred count as skipped; those of a
+        window none of whose images was taken, as dropped.
 
         ``frames``: images the camera published since the last one taken (the ones between
         were never taken: skipped by the grid, or superseded while the model was busy);
@@ -849,7 +866,9 @@ class Pose2DNode(LifecycleNode):
             self._last_input_ns = now
             self._in_freq.tick(frames)
             if self._grid_selects():
-                self.skipped += untaken
+                missed = self._missed_windows(stamp, untaken)
+                self.skipped += untaken - missed
+                self.dropped += missed
                 if not self._on_grid(stamp):
                     self.skipped += 1
                     return
