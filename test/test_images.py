@@ -218,6 +218,46 @@ def test_image_publisher_publishes_like_a_driver(shared_data, ros_context):
 
 
 @pytest.mark.ros
+def test_image_publisher_loops_a_video_on_the_instants(tmp_path, ros_context):
+    """A looping video shows frame (instant / period) mod N, like a folder: rig-wide in step."""
+    video, n = str(tmp_path / 'cam.avi'), 13
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
+    for k in range(n):
+        writer.write(np.full((48, 64, 3), 15 * k, np.uint8))
+    writer.release()
+    got, _, out = _run_publisher([video, '--camera', 'v0', '--rate', '20', '--loop'],
+                                 '/v0/image_raw', Image, 30, ros_context)
+    for _, msg in got:
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        arr, _ = image_to_numpy(msg)
+        assert round(arr.mean() / 15) == (stamp // 50_000_000) % n, out
+
+
+@pytest.mark.ros
+def test_image_publisher_behind_steps_over_the_frames_of_skipped_instants(tmp_path,
+                                                                          ros_context):
+    """Read in order (no loop), a publisher that fell behind keeps its frames on time."""
+    from mv3dpose_ros.nodes.image_publisher import ImagePublisher
+    from rclpy.parameter import Parameter
+    video = str(tmp_path / 'cam.avi')
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
+    for k in range(6):
+        writer.write(np.full((48, 64, 3), 30 * k, np.uint8))
+    writer.release()
+    pub = ImagePublisher(context=ros_context, namespace='/behind', parameter_overrides=[
+        Parameter('source', value=video)])
+    try:
+        assert pub._next_frame()[0] == 0
+        pub._step_over(3)                               # 3 instants skipped: frames 1-3 too
+        key, frame = pub._next_frame()
+        assert key == 4 and round(frame.mean() / 30) == 4
+        pub._step_over(5)                               # past the end, no loop: the end
+        assert pub._next_frame() is None
+    finally:
+        pub.destroy_node()
+
+
+@pytest.mark.ros
 def test_image_publisher_compressed(shared_data, ros_context):
     folder = os.path.join(shared_data, 'panoptic_demo', '00_06')
     got, _, _ = _run_publisher([folder, '--camera', '00_06', '--rate', '10', '--loop',

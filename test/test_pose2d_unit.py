@@ -486,3 +486,31 @@ def test_int8_needs_real_calibration_frames(tmp_path, capsys):
     assert len(fetch_mod.calibration_images(str(tmp_path), limit=4)) == 4
     assert cli_main(['model', 'fetch', '--int8', '--cache-dir', str(tmp_path)]) == 2
     assert '--calibration-images' in capsys.readouterr().err
+
+
+def test_a_video_is_indexed_like_a_folder(tmp_path):
+    """Looping publishers of a recorded rig show frame k of every camera at the same instant."""
+    from mv3dpose_ros.nodes.image_publisher import FrameSource, VIDEO_SEEK_FRAMES
+    video = str(tmp_path / 'clip.avi')
+    n = VIDEO_SEEK_FRAMES + 20
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
+    for i in range(n):
+        writer.write(np.full((48, 64, 3), 3 * i, np.uint8))
+    writer.release()
+    src = FrameSource(video)
+    assert src.seekable and src.length == n
+
+    def shown(frame):
+        return round(frame.mean() / 3)
+
+    # forward by stepping, backward and far ahead by seeking, the wrap of a loop
+    for k in (0, 5, 6, 3, VIDEO_SEEK_FRAMES + 10, 2, n - 1, 0):
+        assert shown(src.frame_at(k)) == k
+        assert src.position == k + 1
+    assert src.skip() and shown(src.read_next()) == 2       # in order after an index
+    src.frame_at(n - 1)
+    assert not src.skip() and src.read_next() is None        # the end
+    src.rewind()
+    assert shown(src.read_next()) == 0
+    src._video_frames = n + 5                    # a container that counts too many frames
+    assert shown(src.frame_at(n + 2)) == 0 and src.length == n + 2

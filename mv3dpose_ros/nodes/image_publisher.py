@@ -23,10 +23,11 @@ image topic of mv3dpose_bringup (camera names map to ROS names as in ``ros/names
 frame with its capture instant, like a driver: with ``--trigger grid`` (default) the instants
 are the multiples of the period, as for cameras triggered from one synchronised clock, so
 publishers of the same rate stamp the same instants whenever each process started, and with
-``--loop`` an image folder shows frame ``(instant / period) mod N`` at each instant, so all
-cameras of a recorded rig show the same moment together; with ``--trigger free`` each
-publisher has its own phase and plays from the first frame. With ``--start-stamp S`` frame
-``k`` is stamped ``S + k / rate`` instead (reproducible stamps).
+``--loop`` an image folder or a video shows frame ``(instant / period) mod N`` at each
+instant, so all cameras of a recorded rig show the same moment together (a video is stepped
+or seeked to it; one whose container gives no frame count plays in order); with
+``--trigger free`` each publisher has its own phase and plays from the first frame. With
+``--start-stamp S`` frame ``k`` is stamped ``S + k / rate`` instead (reproducible stamps).
 
 ``--encoding`` publishes any encoding camera drivers use (bgr8, rgb8, mono8, bgra8, rgba8,
 mono16, yuv422, yuv422_yuy2); ``--compressed jpeg|png`` publishes ``sensor_msgs/CompressedImage``
@@ -69,6 +70,8 @@ PUBLISH_ENCODINGS = ('bgr8', 'rgb8', 'mono8', 'bgra8', 'rgba8', 'mono16', 'yuv42
                      'yuv422_yuy2')
 #: most bytes of serialised messages kept for looping (beyond it frames are re-encoded)
 WIRE_CACHE_BYTES = 512 * 1024 * 1024
+#: a video is stepped forward frame by frame (decoding them) up to this many, else it seeks
+VIDEO_SEEK_FRAMES = 64
 IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp', '.tif', '.tiff', '.webp', '.ppm', '.pgm')
 
 PARAMETERS = {
@@ -99,7 +102,13 @@ PARAMETERS = {
 
 
 class FrameSource:
-    """Frames of a folder or a video, in order, as BGR uint8 arrays."""
+    """
+    Frames of a folder or a video, in order or by index, as BGR uint8 arrays.
+
+    A video whose container gives its frame count is indexed like a folder (``frame_at``
+    steps forward or seeks), so looping publishers of a recorded rig show frame ``k`` of every
+    camera at the same instant; a stream without a count is read in order.
+    """
 
     def __init__(self, path: str, preload: bool = False) -> None:
         self.path = path
@@ -116,6 +125,9 @@ class FrameSource:
                 raise ValueError(f'cannot open video {path} (not a video OpenCV can read?)')
         else:
             raise ValueError(f'source not found: {path!r} (give an image folder or a video)')
+        # frames the video's container reports (0: unknown, e.g. a stream)
+        self._video_frames = 0 if self._cap is None else max(
+            0, int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0))
         self._index = 0
         self._cache: Optional[List[np.ndarray]] = None
         if preload:
@@ -137,7 +149,10 @@ class FrameSource:
                 raise ValueError(f'cannot decode image {name}')
             return image
         ok, frame = self._cap.read()
-        return frame if ok else None
+        if not ok:
+            return None
+        self._index += 1
+        return frame
 
     def read_next(self) -> Optional[np.ndarray]:
         """Return the next frame, or None at the end."""
@@ -150,8 +165,8 @@ class FrameSource:
 
     @property
     def seekable(self) -> bool:
-        """Tell whether frames have an index (a folder, or a preloaded video)."""
-        return self.files is not None or self._cache is not None
+        """Tell whether frames have an index (a folder, a preloaded video, a counted video)."""
+        return self.files is not None or self._cache is not None or self._video_frames > 0
 
     @property
     def position(self) -> int:
@@ -161,19 +176,40 @@ class FrameSource:
     @property
     def length(self) -> int:
         """Return the number of frames of a seekable source."""
-        return len(self._cache) if self._cache is not None else len(self.files)
+        if self._cache is not None:
+            return len(self._cache)
+        return len(self.files) if self.files is not None else self._video_frames
 
     def frame_at(self, index: int) -> np.ndarray:
         """Return frame ``index`` of a seekable source; the next frame is the one after it."""
+        if self._streaming:
+            ahead = index - self._index
+            if 0 <= ahead <= VIDEO_SEEK_FRAMES:
+                for _ in range(ahead):           # decodes, but cheaper than a seek back
+                    self._cap.grab()
+            else:
+                self._cap.set(cv2.CAP_PROP_POS_FRAMES, index)
         self._index = index
         frame = self.read_next()
+        if frame is None and self._streaming and 0 < index < self._video_frames:
+            self._video_frames = index           # the container counted more than it holds
+            return self.frame_at(0)
         if frame is None:
             raise ValueError(f'{self.path}: no frame {index}')
         return frame
 
+    @property
+    def _streaming(self) -> bool:
+        """Tell whether frames come from the video file (not preloaded)."""
+        return self._cap is not None and self._cache is None
+
     def skip(self) -> bool:
-        """Step over the next frame without decoding it (seekable sources); False at the end."""
-        if self._index >= self.length:
+        """Step over the next frame (without converting it); False at the end."""
+        if self._streaming:
+            if self._video_frames and self._index >= self._video_frames or \
+                    not self._cap.grab():
+                return False
+        elif self._index >= self.length:
             return False
         self._index += 1
         return True
@@ -290,7 +326,9 @@ class ImagePublisher(Node):
         the same rate in any number of processes or hosts (chrony / PTP) stamp the same
         instants; free: one period after the previous frame, from the first one. When
         publishing falls behind, grid instants that have passed are skipped (counted) rather
-        than published late.
+        than published late, with their frames: looping on the grid, a seekable source (a
+        folder, a video with a frame count) shows frame ``instant % length`` at each instant,
+        the same in every publisher of a rig; read in order, their frames are stepped over.
         """
         clock = self.get_clock()
         need = int(self.params['wait_for_subscribers'])
@@ -305,14 +343,16 @@ class ImagePublisher(Node):
             if now < due:
                 self.done.wait(min(due - now, 100_000_000) / 1e9)
                 continue
+            synced = grid and self.params['loop'] and self.source.seekable
             if grid and now - due >= self.period_ns:
                 late = (now - due) // self.period_ns
                 self.skipped += late
                 due += late * self.period_ns
+                if not synced:                   # the frames of those instants go by too
+                    self._step_over(late)
                 self.get_logger().warn(
                     f'publishing fell behind {self.params["rate_hz"]:g} Hz: {self.skipped} '
                     'frame instants skipped so far (CPU overloaded?)', throttle_duration_sec=10.0)
-            synced = grid and self.params['loop'] and self.source.seekable
             nxt = self._next_frame(due // self.slot_ns if synced else None)
             if nxt is None:
                 break
@@ -327,6 +367,14 @@ class ImagePublisher(Node):
         else:                           # stopped by a signal: rosout is gone
             print(f'[image_publisher] {text}', file=sys.stderr, flush=True)
         self.done.set()
+
+    def _step_over(self, frames: int) -> None:
+        """Step over ``frames`` frames of a source read in order (a camera drops them too)."""
+        for _ in range(frames):
+            if not self.source.skip():
+                if not self.params['loop']:
+                    return
+                self.source.rewind()
 
     def _publish(self, key: int, frame: Optional[np.ndarray], stamp_ns: int) -> None:
         header = Header(stamp=ns_to_stamp(stamp_ns), frame_id=self.frame_id)
