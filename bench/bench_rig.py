@@ -29,6 +29,11 @@ every ``~/tracks`` message and ``/diagnostics``. Printed at the end:
   tracks message with N confirmed people arrived.
 
     python bench/bench_rig.py [--cameras 4] [--rate 10] [--duration 60] [--compressed jpeg]
+                              [--video]
+
+``--video`` replays a recorded video rig instead: each camera's frames are first written as an
+MPEG-4 video (each time point ``--hold`` s long; kept in the temp folder for the next run) and
+the publishers read the videos, as a user replays the videos of a recorded rig.
 
 ``test/test_live_rig.py`` runs the same rig, shorter, and asserts on the same figures.
 """
@@ -211,11 +216,40 @@ def drop_table(probe: Probe, published: Dict[str, str]) -> List[str]:
 
 
 def publisher_command(cam: str, rate: float, compressed: str = '',
-                      extra: Sequence[str] = ()) -> List[str]:
+                      extra: Sequence[str] = (), video: str = '') -> List[str]:
     """Return the ``mv3dpose_image_publisher`` command of Panoptic camera ``cam``."""
-    cmd = ['mv3dpose_image_publisher', os.path.join(DEMO, cam), '--camera', cam, '--rate',
-           f'{rate:g}', '--loop', '--preload', '--calibration', CALIBRATION, *extra]
+    source = [video] if video else [os.path.join(DEMO, cam), '--preload']
+    cmd = ['mv3dpose_image_publisher', *source, '--camera', cam, '--rate', f'{rate:g}',
+           '--loop', '--calibration', CALIBRATION, *extra]
     return cmd + (['--compressed', compressed] if compressed else [])
+
+
+def make_videos(cams: Sequence[str], rate: float, hold: float) -> Dict[str, str]:
+    """Write each camera's Panoptic frames as an MPEG-4 video, each shown ``hold`` s."""
+    import cv2
+    folder = os.path.join(tempfile.gettempdir(), f'bench_rig_videos_{rate:g}hz_{hold:g}s')
+    os.makedirs(folder, exist_ok=True)
+    repeat = max(1, int(round(hold * rate)))
+    out = {}
+    for cam in cams:
+        out[cam] = path = os.path.join(folder, f'{cam}.mp4')
+        if os.path.exists(path):
+            continue
+        part = os.path.join(folder, f'{cam}.part.mp4')
+        writer = None
+        for name in sorted(os.listdir(os.path.join(DEMO, cam))):
+            image = cv2.imread(os.path.join(DEMO, cam, name))
+            if image is None:
+                continue
+            if writer is None:
+                writer = cv2.VideoWriter(part, cv2.VideoWriter_fourcc(*'mp4v'), rate,
+                                         (image.shape[1], image.shape[0]))
+            for _ in range(repeat):
+                writer.write(image)
+        writer.release()
+        os.replace(part, path)
+        print(f'bench_rig: wrote {path} ({repeat} frames per time point)', flush=True)
+    return out
 
 
 def stop(procs: Sequence[subprocess.Popen], timeout: float = 20.0) -> None:
@@ -268,6 +302,9 @@ def main() -> int:
     parser.add_argument('--pose2d-param', action='append', default=[], metavar='NAME:=VALUE',
                         help='passed to mv3dpose_bringup (e.g. inference_rate_hz:=2)')
     parser.add_argument('--logs', default='', help='folder for the process logs')
+    parser.add_argument('--video', action='store_true',
+                        help='replay the frames as one MPEG-4 video per camera (each time '
+                             'point --hold s long) instead of image folders')
     args = parser.parse_args()
     if not os.path.isdir(DEMO):
         print(f'bench_rig: skipped: no Panoptic frames at {DEMO}')
@@ -283,6 +320,7 @@ def main() -> int:
             doc = yaml.safe_load(f)
         max_wait = next((float(s['ros__parameters']['sync']['max_wait_s'])
                          for s in doc.values() if 'sync' in s.get('ros__parameters', {})), 0.1)
+    videos = make_videos(cams, args.rate, args.hold) if args.video else {}
     logdir = args.logs or tempfile.mkdtemp(prefix='bench_rig_')
     os.makedirs(logdir, exist_ok=True)
     procs, logs = [], {}
@@ -301,9 +339,10 @@ def main() -> int:
                              *over], 'bringup'))
         for cam in cams:
             logs[cam] = os.path.join(logdir, f'publisher_{cam}.log')
-            hold = ['--hold', f'{args.hold:g}'] if args.hold else []
+            hold = ['--hold', f'{args.hold:g}'] if args.hold and not videos else []
             procs.append(launch(publisher_command(cam, args.rate, args.compressed,
-                                                  ['--wait-for-subscribers', '1', *hold]),
+                                                  ['--wait-for-subscribers', '1', *hold],
+                                                  videos.get(cam, '')),
                                 f'publisher_{cam}'))
         deadline = time.monotonic() + 120
         while probe.cameras_answering() < len(cams) and time.monotonic() < deadline:
@@ -341,7 +380,8 @@ def main() -> int:
     print(f'first tracks with {args.people} confirmed people: '
           + (f'{first:.1f} s after start' if first is not None else 'never'))
     pct = f' ({100.0 * share[0] / share[1]:.1f} %)' if share[1] else ''
-    held = (f'; each image held {args.hold:g} s' if args.hold else
+    held = (f'; each image held {args.hold:g} s' + (' (MPEG-4 videos)' if videos else '')
+            if args.hold else
             '; the looped images change every instant (people jump between them)')
     print(f'tracks messages with {args.people} confirmed people in the measured window: '
           f'{share[0]} of {share[1]}{pct}{held}')
