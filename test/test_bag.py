@@ -310,12 +310,17 @@ def test_sigkilled_recorder_loses_at_most_its_last_checkpoint(tmp_path):
         rec.wait(timeout=10)
         killed_at = time.monotonic()
     finally:
-        pub.send_signal(signal.SIGINT)
-        pub.wait(timeout=20)
-        log.close()
-        pout = (tmp_path / 'published.txt').read_text()
         if rec.poll() is None:
             rec.kill()
+            rec.wait()
+        pub.send_signal(signal.SIGINT)
+        try:
+            pub.wait(timeout=20)
+        except subprocess.TimeoutExpired:       # stuck in publish: never leave it running
+            pub.kill()
+            pub.wait()
+        log.close()
+        pout = (tmp_path / 'published.txt').read_text()
     published = [(float(t), int(n)) for t, n in (line.split() for line in pout.split('\n')
                                                  if line.strip())]
     proc = subprocess.run(MV3DPOSE + ['bag', 'recover', str(out)], capture_output=True,

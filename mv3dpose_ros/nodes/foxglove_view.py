@@ -58,6 +58,7 @@ from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ms
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos, sensor_qos
 from mv3dpose_ros.ros.scene import camera_update, skeleton_update
+from mv3dpose_ros.ros.spin import spin_until_shutdown
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -295,7 +296,7 @@ def main(args: Optional[List[str]] = None) -> int:
         node = FoxgloveView(parameter_overrides=overrides)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        spin_until_shutdown(executor)
     except (ValueError, RuntimeError) as exc:
         print(f'mv3dpose_foxglove_view: error: {exc}', file=sys.stderr)
         return 2

@@ -59,6 +59,7 @@ from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ns
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
+from mv3dpose_ros.ros.spin import spin_until_shutdown
 from mv3dpose_ros.ros.tf import TfBridge, TfError
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -959,7 +960,7 @@ def main(args: Optional[List[str]] = None) -> int:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
-        executor.spin()
+        spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -56,6 +56,7 @@ from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.names import camera_namespace
 from mv3dpose_ros.ros.qos import describe, sensor_qos
+from mv3dpose_ros.ros.spin import spin_until_shutdown
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
@@ -461,8 +462,7 @@ def main(args: Optional[List[str]] = None) -> int:
         worker = threading.Thread(target=node.run, name='publisher', daemon=True)
         worker.start()
         try:
-            while rclpy.ok() and not node.done.is_set():
-                executor.spin_once(timeout_sec=0.1)
+            spin_until_shutdown(executor, node.done.is_set)
         finally:
             node.done.set()
             worker.join(timeout=5.0)

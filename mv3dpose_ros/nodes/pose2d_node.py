@@ -60,6 +60,7 @@ from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
+from mv3dpose_ros.ros.spin import spin_until_shutdown
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
@@ -1237,7 +1238,7 @@ def main(args: Optional[List[str]] = None) -> int:
         else:
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            executor.spin()
+            spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

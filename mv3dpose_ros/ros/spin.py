@@ -1,0 +1,40 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Spinning a node's executor until the process is asked to stop."""
+
+from typing import Callable, Optional
+
+from rclpy.executors import Executor, ExternalShutdownException
+
+
+def spin_until_shutdown(executor: Executor,
+                        until: Optional[Callable[[], bool]] = None) -> None:
+    """
+    Spin ``executor`` until Ctrl-C or SIGTERM shuts its context down (or ``until()`` is true).
+
+    rclpy's signal handler shuts the context down from outside the executor, which may be
+    taking a message just then; the take then raises (``RCLError``, or pybind11's
+    ``RuntimeError: Unable to convert call argument``) instead of
+    ``ExternalShutdownException``, and a node stopped by Ctrl-C exited 1 with a traceback.
+    Once the context is shut down any exception is that normal end; before, it propagates.
+    """
+    try:
+        while executor.context.ok() and not (until is not None and until()):
+            executor.spin_once(timeout_sec=0.1)
+    except ExternalShutdownException:
+        return
+    except Exception:  # noqa: B902 - re-raised unless the context was shut down meanwhile
+        if executor.context.ok():
+            raise
