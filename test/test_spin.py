@@ -45,6 +45,8 @@ def test_an_error_while_running_still_propagates_and_until_stops():
         executor.spin_once = lambda timeout_sec=None: spins.append(timeout_sec)
         spin_until_shutdown(executor, lambda: len(spins) >= 3)
         assert spins == [0.1, 0.1, 0.1]
+        spin_until_shutdown(executor, spins=2)
+        assert len(spins) == 5
 
         def broken(timeout_sec=None):
             raise RuntimeError('a real bug')

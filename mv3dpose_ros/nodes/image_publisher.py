@@ -466,8 +466,7 @@ def main(args: Optional[List[str]] = None) -> int:
         finally:
             node.done.set()
             worker.join(timeout=5.0)
-        for _ in range(5):             # let the last messages go out
-            executor.spin_once(timeout_sec=0.1)
+        spin_until_shutdown(executor, spins=5)     # let the last messages go out
     except ValueError as exc:
         print(f'image_publisher: error: {exc}', file=sys.stderr)
         return 2

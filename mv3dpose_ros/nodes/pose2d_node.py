@@ -40,6 +40,7 @@ import math
 import os
 import statistics
 import struct
+import sys
 import threading
 import time
 from typing import Any, Deque, List, Optional, Sequence, Tuple, Union
@@ -547,6 +548,7 @@ class Pose2DNode(LifecycleNode):
         except ValueError as exc:
             self._rate_error = str(exc)
         self._stop = False
+        self.worker_stuck = False            # the inference thread outlived _stop_worker
         self._stats_lock = threading.Lock()
         self._reset_stats()
         self._rl = RateLimitedLog(lambda text: self.get_logger().error(text), 5.0)
@@ -785,6 +787,8 @@ class Pose2DNode(LifecycleNode):
             self._cv.notify_all()
         if self._worker is not None and self._worker is not threading.current_thread():
             self._worker.join(timeout=5.0)
+            # still inside native code (a model loading or running on a starved CPU)
+            self.worker_stuck = self._worker.is_alive()
         self._worker = None
 
     def destroy_node(self) -> None:
@@ -1245,9 +1249,15 @@ def main(args: Optional[List[str]] = None) -> int:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    if node is not None and node.worker_stuck:
+        # Exiting normally would run onnxruntime's and DDS's C++ destructors under the thread
+        # still inside them, which can hang the process until SIGKILL.
+        print('[pose2d_node] the inference thread did not stop within 5 s (inside the model); '
+              'exiting without waiting for it', file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(code)
     return code
 
 
 if __name__ == '__main__':
-    import sys
     sys.exit(main())

@@ -19,10 +19,12 @@ from typing import Callable, Optional
 from rclpy.executors import Executor, ExternalShutdownException
 
 
-def spin_until_shutdown(executor: Executor,
-                        until: Optional[Callable[[], bool]] = None) -> None:
+def spin_until_shutdown(executor: Executor, until: Optional[Callable[[], bool]] = None,
+                        spins: Optional[int] = None) -> None:
     """
-    Spin ``executor`` until Ctrl-C or SIGTERM shuts its context down (or ``until()`` is true).
+    Spin ``executor`` until Ctrl-C or SIGTERM shuts its context down.
+
+    Or until ``until()`` is true, or ``spins`` times (0.1 s each at most).
 
     rclpy's signal handler shuts the context down from outside the executor, which may be
     taking a message just then; the take then raises (``RCLError``, or pybind11's
@@ -30,9 +32,12 @@ def spin_until_shutdown(executor: Executor,
     ``ExternalShutdownException``, and a node stopped by Ctrl-C exited 1 with a traceback.
     Once the context is shut down any exception is that normal end; before, it propagates.
     """
+    done = 0
     try:
-        while executor.context.ok() and not (until is not None and until()):
+        while executor.context.ok() and not (until is not None and until()) and (
+                spins is None or done < spins):
             executor.spin_once(timeout_sec=0.1)
+            done += 1
     except ExternalShutdownException:
         return
     except Exception:  # noqa: B902 - re-raised unless the context was shut down meanwhile
