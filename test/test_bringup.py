@@ -125,6 +125,29 @@ def test_a_dying_node_stops_bringup_with_its_name_and_reason(rig, tmp_path):
                      r'.*no_such_model\.onnx', last), res.stderr[-3000:]
 
 
+@pytest.mark.skipif(not os.path.isdir('/dev/shm'), reason='no /dev/shm')
+def test_bringup_removes_shared_memory_left_by_killed_processes(rig, tmp_path):
+    # a segment of a process that is gone: nobody holds its lock file (names Fast DDS never
+    # makes: it uses hex)
+    names = ['fastrtps_zzmv3dposetest01', 'fastrtps_zzmv3dposetest01_el']
+    paths = [os.path.join('/dev/shm', n) for n in names]
+    old = time.time() - 60.0
+    for path, size in zip(paths, (4096, 0)):
+        with open(path, 'wb') as f:
+            f.truncate(size)
+        os.utime(path, (old, old))
+    try:
+        res = bringup('--rig', rig, '--pose2d-param', f'model.path:={tmp_path / "none.onnx"}',
+                      '--stop-timeout', '5')
+        assert not any(os.path.exists(p) for p in paths)
+        said = r'\[bringup\] removed \d+ Fast DDS shared-memory files \(\d+ MB\) in /dev/shm left'
+        assert re.search(said, res.stderr), res.stderr[-3000:]
+    finally:
+        for path in paths:
+            if os.path.exists(path):
+                os.remove(path)
+
+
 def test_bad_rig_and_cameras_fail_with_clear_messages(rig, tmp_path):
     res = bringup('--rig', str(tmp_path / 'missing.yaml'), '--dry-run')
     assert res.returncode != 0 and 'cannot load rig' in res.stderr

@@ -34,7 +34,9 @@ or SIGTERM stops all children: SIGINT to each, then SIGTERM after ``--stop-timeo
 SIGKILL. Child output is forwarded line by line. A child that dies stops everything and
 bringup exits 1 with a last line naming the node, its exit code and the last error line of its
 output (a rig with a silently missing camera is worse than a clear stop), unless ``--respawn``
-restarts it.
+restarts it. Before starting the nodes, and before each restart, it removes the Fast DDS
+shared-memory files in /dev/shm of processes that are gone (``ros/shm.py``; 64 MB per killed
+process that published images), unless ``--keep-shm``.
 
 Names: ``{camera}`` in ``--namespace`` and ``--image-topic`` is the camera's ROS name
 (``ros/names.py``: ``00_03`` -> ``cam00_03``); both are validated before anything starts. The
@@ -58,6 +60,7 @@ from mv3dpose_ros.core.calibration import load_calibration
 from mv3dpose_ros.ros.memory import with_hugepages
 from mv3dpose_ros.ros.names import camera_topic, check_pattern, RosNameError
 from mv3dpose_ros.ros.params import package_search_dirs, resolve_path
+from mv3dpose_ros.ros.shm import clean_stale_files, SHM_DIR, uses_fast_dds
 import yaml
 
 DEFAULT_PARAMS = ('config/pose2d.yaml', 'config/fusion.yaml')
@@ -241,9 +244,11 @@ class Supervisor:
     """Start, watch and stop the child processes; forward their output."""
 
     def __init__(self, commands: Dict[str, List[str]], respawn: bool, stop_timeout: float,
-                 log: Any = sys.stderr, env: Optional[Dict[str, str]] = None) -> None:
+                 log: Any = sys.stderr, env: Optional[Dict[str, str]] = None,
+                 clean_shm: bool = False) -> None:
         self.commands = commands
         self.respawn = respawn
+        self.clean_shm = clean_shm
         self.stop_timeout = stop_timeout
         self.log = log
         self.env = env
@@ -283,6 +288,15 @@ class Supervisor:
         self.say(f'started {name} (pid {proc.pid}): '
                  f'{" ".join(shlex.quote(a) for a in self.commands[name])}')
 
+    def remove_stale_shm(self) -> None:
+        """Remove Fast DDS shared memory left by killed processes (``ros/shm.py``); say so."""
+        if not self.clean_shm:
+            return
+        removed, freed = clean_stale_files()
+        if removed:
+            self.say(f'removed {removed} Fast DDS shared-memory files ({freed / 2**20:.0f} MB) '
+                     f'in {SHM_DIR} left by processes that are gone (--keep-shm keeps them)')
+
     def _exit_text(self, name: str, code: int) -> str:
         self._readers[name].join(timeout=2.0)     # the output up to the exit
         how = (f'killed by {signal.Signals(-code).name}' if code < 0 else f'exit code {code}')
@@ -294,6 +308,7 @@ class Supervisor:
 
     def run(self) -> int:
         """Start everything, supervise until a stop request, then stop; return the exit code."""
+        self.remove_stale_shm()
         for name in self.commands:
             self.start(name)
         while not self.stopping:
@@ -305,6 +320,7 @@ class Supervisor:
                 self.say(text)
                 if self.respawn:
                     time.sleep(1.0)
+                    self.remove_stale_shm()              # a crash leaves its segment behind
                     self.start(name)
                 else:
                     self.died[name] = text
@@ -380,6 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar='PORT', help='also start the live web view (mv3dpose_foxglove_view) '
                    'on ws://127.0.0.1:PORT (default 8765)')
     p.add_argument('--respawn', action='store_true', help='restart nodes that exit')
+    p.add_argument('--keep-shm', action='store_true', help='do not remove the Fast DDS '
+                   f'shared-memory files in {SHM_DIR} of processes that are gone (removed by '
+                   'default at start and before each respawn)')
     p.add_argument('--stop-timeout', type=float, default=10.0,
                    help='seconds to wait after SIGINT before SIGTERM (default 10)')
     p.add_argument('--dry-run', action='store_true', help='print the commands and the '
@@ -407,7 +426,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             print(yaml.safe_dump(plan.overrides, sort_keys=False), end='')
             print(f'# Fast DDS profile: {plan.dds_profile or "none (Fast DDS defaults)"}')
             return 0
-        sup = Supervisor(commands, args.respawn, args.stop_timeout, env=plan.env)
+        sup = Supervisor(commands, args.respawn, args.stop_timeout, env=plan.env,
+                         clean_shm=not args.keep_shm and uses_fast_dds(plan.env))
         signal.signal(signal.SIGINT, sup.request_stop)
         signal.signal(signal.SIGTERM, sup.request_stop)
         sup.say(f'rig {plan.rig_path}: cameras {", ".join(plan.cameras)}; Fast DDS profile '
