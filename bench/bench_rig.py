@@ -35,6 +35,12 @@ every ``~/tracks`` message and ``/diagnostics``. Printed at the end:
 MPEG-4 video (each time point ``--hold`` s long; kept in the temp folder for the next run) and
 the publishers read the videos, as a user replays the videos of a recorded rig.
 
+``--portrait`` makes portrait cameras of them: each frame's 9:16 window around the scene
+is scaled to 1080x1920 (people upright, as a phone or a camera mounted for portrait records
+them) with the matching intrinsics, so the same real scene runs through the portrait model
+sizes. (Turning the frames a quarter turn instead would lay the people on their side: the
+model finds 0-2 of the 3 then.)
+
 ``test/test_live_rig.py`` runs the same rig, shorter, and asserts on the same figures.
 """
 
@@ -216,18 +222,71 @@ def drop_table(probe: Probe, published: Dict[str, str]) -> List[str]:
 
 
 def publisher_command(cam: str, rate: float, compressed: str = '',
-                      extra: Sequence[str] = (), video: str = '') -> List[str]:
+                      extra: Sequence[str] = (), video: str = '', frames: str = DEMO,
+                      calibration: str = CALIBRATION) -> List[str]:
     """Return the ``mv3dpose_image_publisher`` command of Panoptic camera ``cam``."""
-    source = [video] if video else [os.path.join(DEMO, cam), '--preload']
+    source = [video] if video else [os.path.join(frames, cam), '--preload']
     cmd = ['mv3dpose_image_publisher', *source, '--camera', cam, '--rate', f'{rate:g}',
-           '--loop', '--calibration', CALIBRATION, *extra]
+           '--loop', '--calibration', calibration, *extra]
     return cmd + (['--compressed', compressed] if compressed else [])
 
 
-def make_videos(cams: Sequence[str], rate: float, hold: float) -> Dict[str, str]:
+def portrait_rig(cams: Sequence[str]) -> Tuple[str, str]:
+    """
+    Write the Panoptic cameras as portrait 1080x1920 cameras; return (frames, rig YAML).
+
+    Each frame's 9:16 window (608 x 1080 px) centred on the people (the median centre of the
+    people the default 2D model finds in the camera's frames) is scaled to 1080 x 1920, as a
+    portrait camera would see them, upright. The intrinsics follow the crop and the scale
+    (``cv2.resize``'s pixel centres); distortion and pose stay, being in normalised
+    coordinates. People near the edges of a view may be cut, as in a real portrait rig.
+    """
+    import cv2
+    import numpy as np
+    from mv3dpose_ros.core.calibration import load_calibration, save_rig_yaml
+    from mv3dpose_ros.core.camera import Camera
+    folder = os.path.join(tempfile.gettempdir(), 'bench_rig_portrait')
+    from mv3dpose_ros.pose2d.estimator import open_estimator
+    from mv3dpose_ros.pose2d.models import resolve_model_path
+    rig = load_calibration(CALIBRATION, cameras=cams)
+    estimator = open_estimator(resolve_model_path('yolo11n-pose', '384x640'), threads=1)
+    out_w, out_h = 1080, 1920
+    portrait = {}
+    for cam, c in rig.items():
+        crop_w = int(round(c.height * out_w / out_h))
+        names = sorted(os.listdir(os.path.join(DEMO, cam)))
+        centres = []
+        for name in names:
+            found = estimator.infer(cv2.imread(os.path.join(DEMO, cam, name)))
+            centres += [(b[0] + b[2]) / 2 for b, p in zip(found.boxes, found.scores) if p >= 0.5]
+        u = float(np.median(centres)) if centres else c.width / 2
+        x0 = int(min(max(0, round(u - crop_w / 2)), c.width - crop_w))
+        sx, sy = out_w / crop_w, out_h / c.height
+        K = np.array(c.K, dtype=float)
+        K[0] *= sx
+        K[0, 2] = (c.K[0, 2] - x0 + 0.5) * sx - 0.5
+        K[1] *= sy
+        K[1, 2] = (c.K[1, 2] + 0.5) * sy - 0.5
+        portrait[cam] = Camera(cam, K, c.dist, c.R, c.t, out_w, out_h)
+        out = os.path.join(folder, cam)
+        os.makedirs(out, exist_ok=True)
+        for name in sorted(os.listdir(os.path.join(DEMO, cam))):
+            target = os.path.join(out, name)
+            image = None if os.path.exists(target) else cv2.imread(os.path.join(DEMO, cam, name))
+            if image is not None:
+                cv2.imwrite(target, cv2.resize(image[:, x0:x0 + crop_w], (out_w, out_h),
+                                               interpolation=cv2.INTER_LINEAR))
+    path = os.path.join(folder, 'rig.yaml')
+    save_rig_yaml(portrait, path, comment='Panoptic cameras as portrait cameras (bench_rig.py)')
+    return folder, path
+
+
+def make_videos(cams: Sequence[str], rate: float, hold: float,
+                frames: str = DEMO) -> Dict[str, str]:
     """Write each camera's Panoptic frames as an MPEG-4 video, each shown ``hold`` s."""
     import cv2
-    folder = os.path.join(tempfile.gettempdir(), f'bench_rig_videos_{rate:g}hz_{hold:g}s')
+    kind = '_portrait' if frames != DEMO else ''
+    folder = os.path.join(tempfile.gettempdir(), f'bench_rig_videos{kind}_{rate:g}hz_{hold:g}s')
     os.makedirs(folder, exist_ok=True)
     repeat = max(1, int(round(hold * rate)))
     out = {}
@@ -237,8 +296,8 @@ def make_videos(cams: Sequence[str], rate: float, hold: float) -> Dict[str, str]
             continue
         part = os.path.join(folder, f'{cam}.part.mp4')
         writer = None
-        for name in sorted(os.listdir(os.path.join(DEMO, cam))):
-            image = cv2.imread(os.path.join(DEMO, cam, name))
+        for name in sorted(os.listdir(os.path.join(frames, cam))):
+            image = cv2.imread(os.path.join(frames, cam, name))
             if image is None:
                 continue
             if writer is None:
@@ -305,6 +364,9 @@ def main() -> int:
     parser.add_argument('--video', action='store_true',
                         help='replay the frames as one MPEG-4 video per camera (each time '
                              'point --hold s long) instead of image folders')
+    parser.add_argument('--portrait', action='store_true',
+                        help="portrait cameras: each frame's 9:16 window around the people, "
+                             'scaled to 1080x1920, with its calibration')
     args = parser.parse_args()
     if not os.path.isdir(DEMO):
         print(f'bench_rig: skipped: no Panoptic frames at {DEMO}')
@@ -320,7 +382,8 @@ def main() -> int:
             doc = yaml.safe_load(f)
         max_wait = next((float(s['ros__parameters']['sync']['max_wait_s'])
                          for s in doc.values() if 'sync' in s.get('ros__parameters', {})), 0.1)
-    videos = make_videos(cams, args.rate, args.hold) if args.video else {}
+    frames, calibration = portrait_rig(cams) if args.portrait else (DEMO, CALIBRATION)
+    videos = make_videos(cams, args.rate, args.hold, frames) if args.video else {}
     logdir = args.logs or tempfile.mkdtemp(prefix='bench_rig_')
     os.makedirs(logdir, exist_ok=True)
     procs, logs = [], {}
@@ -335,14 +398,14 @@ def main() -> int:
     try:
         over = [a for p in args.fusion_param for a in ('--fusion-param', p)]
         over += [a for p in args.pose2d_param for a in ('--pose2d-param', p)]
-        procs.append(launch(['mv3dpose_bringup', '--rig', CALIBRATION, '--cameras', *cams,
+        procs.append(launch(['mv3dpose_bringup', '--rig', calibration, '--cameras', *cams,
                              *over], 'bringup'))
         for cam in cams:
             logs[cam] = os.path.join(logdir, f'publisher_{cam}.log')
             hold = ['--hold', f'{args.hold:g}'] if args.hold and not videos else []
             procs.append(launch(publisher_command(cam, args.rate, args.compressed,
                                                   ['--wait-for-subscribers', '1', *hold],
-                                                  videos.get(cam, '')),
+                                                  videos.get(cam, ''), frames, calibration),
                                 f'publisher_{cam}'))
         deadline = time.monotonic() + 120
         while probe.cameras_answering() < len(cams) and time.monotonic() < deadline:
@@ -363,7 +426,8 @@ def main() -> int:
     res = analyse(probe, t_ready + int(args.warmup * NS), t_end, max_wait)
     published = published_counts(logs)
     probe.close()
-    print(f'{len(cams)} cameras x 1920x1080 {args.compressed or "bgr8"} at {args.rate:g} Hz, '
+    size = '1080x1920' if args.portrait else '1920x1080'
+    print(f'{len(cams)} cameras x {size} {args.compressed or "bgr8"} at {args.rate:g} Hz, '
           f'{args.duration:g} s measured after {args.warmup:g} s warm-up; bringup '
           f'{" ".join(args.fusion_param + args.pose2d_param) or "defaults"}; '
           f'{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; logs in {logdir}')
