@@ -257,6 +257,38 @@ def test_image_publisher_behind_steps_over_the_frames_of_skipped_instants(tmp_pa
         pub.destroy_node()
 
 
+def test_image_publisher_ends_quietly_when_ctrl_c_races_a_publish(tmp_path, capfd):
+    """Ctrl-C shuts the context down while the thread publishes: the end, with the count."""
+    import rclpy
+    from mv3dpose_ros.nodes.image_publisher import ImagePublisher
+    from rclpy.parameter import Parameter
+    for k in range(3):
+        cv2.imwrite(str(tmp_path / f'{k}.png'), np.full((48, 64, 3), 40 * k, np.uint8))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    pub = ImagePublisher(context=ctx, namespace='/race', parameter_overrides=[
+        Parameter('source', value=str(tmp_path)), Parameter('rate_hz', value=50.0),
+        Parameter('loop', value=True)])
+    publish = pub.image_pub.publish
+    calls = []
+
+    def publish_then_interrupted(msg):
+        calls.append(msg)
+        if len(calls) < 3:
+            return publish(msg)
+        rclpy.shutdown(context=ctx)             # as rclpy's SIGINT handler does
+        return publish(msg)                     # raises: the publisher's context is invalid
+
+    pub.image_pub.publish = publish_then_interrupted
+    try:
+        pub.run()                               # returns instead of raising
+        assert len(calls) == 3 and pub.count == 2 and pub.done.is_set()
+        assert '[image_publisher] published 2 frames' in capfd.readouterr().err
+    finally:
+        pub.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
 @pytest.mark.ros
 def test_image_publisher_compressed(shared_data, ros_context):
     folder = os.path.join(shared_data, 'panoptic_demo', '00_06')

@@ -323,6 +323,27 @@ def test_inference_thread_yields_the_cpu_to_the_light_work(ros_context, tmp_path
         node.destroy_node()
 
 
+def test_ctrl_c_is_not_reported_as_a_failed_image_take(tmp_path):
+    """rclpy's SIGINT handler shuts the context down under the intake: no error line."""
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = Pose2DNode(context=ctx, namespace='/camint', parameter_overrides=[
+        Parameter('model.cache_dir', value=_fake_cache(tmp_path, [(384, 640)])),
+        Parameter('model.threads', value=1)])
+    said = []
+    node._rl = lambda key, text, now: said.append(text)
+    try:
+        assert node.active, node.error
+        time.sleep(0.3)                          # the inference thread waits in the intake
+        rclpy.shutdown(context=ctx)              # as Ctrl-C does
+        time.sleep(0.5)
+        assert not said, said
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
 def test_missing_model_is_a_clear_start_error(tmp_path):
     env = dict(os.environ, MV3DPOSE_MODEL_DIR=str(tmp_path))
     res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node', '--ros-args',

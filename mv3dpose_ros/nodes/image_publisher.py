@@ -357,8 +357,13 @@ class ImagePublisher(Node):
             nxt = self._next_frame(due // self.slot_ns if synced else None)
             if nxt is None:
                 break
-            self._publish(*nxt, due if grid else (now if self.stamp_now else
-                                                  self.stamp_ns(self.count)))
+            try:
+                self._publish(*nxt, due if grid else (now if self.stamp_now else
+                                                      self.stamp_ns(self.count)))
+            except Exception:  # noqa: B902 - rclpy raises RCLError, a pybind11 type
+                if self.context.ok():
+                    raise
+                break                # Ctrl-C shut the context down during this publish
             due += self.period_ns
         text = (f'published {self.count} frames'
                 + (f', skipped {self.skipped} instants' if self.skipped else '')

@@ -932,10 +932,12 @@ class Pose2DNode(LifecycleNode):
         try:
             ex.spin_once(timeout_sec=0.1)
         except Exception as exc:  # noqa: B902 - e.g. shut down while deactivating
-            if not self._stop:
+            if self._stop:
+                return
+            if self.context.ok():                # else Ctrl-C shut the context down: no error
                 self._rl('intake', f'camera {self.camera_id}: taking an image failed: {exc!r}',
                          self.get_clock().now().nanoseconds)
-                time.sleep(0.1)
+            time.sleep(0.1)
 
     def _work(self) -> None:
         nice = int(self._param('inference_nice'))
