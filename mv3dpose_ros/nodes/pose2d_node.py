@@ -963,6 +963,8 @@ class Pose2DNode(LifecycleNode):
                 out = self.process(msg, arrived)
             except Exception as exc:  # noqa: B902 - one bad frame must never stop the node
                 out = None
+                if not self.context.ok():        # Ctrl-C shut the context down: publish failed
+                    continue
                 self.failed += 1
                 self._rl('failed', f'camera {self.camera_id}: inference failed: {exc!r}',
                          self.get_clock().now().nanoseconds)
