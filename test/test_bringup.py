@@ -21,8 +21,10 @@ model download is needed: images in, ``persons_2d`` per camera, ``tracks`` from 
 
 import os
 import re
+import signal
 import subprocess
 import sys
+import threading
 import time
 
 from conftest import interrupt
@@ -146,6 +148,36 @@ def test_bringup_removes_shared_memory_left_by_killed_processes(rig, tmp_path):
         for path in paths:
             if os.path.exists(path):
                 os.remove(path)
+
+
+def test_respawn_restarts_a_dying_node_after_growing_delays(rig, tmp_path):
+    """--respawn: a node that cannot start is restarted after 1 s, then 2 s, then 4 s."""
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'mv3dpose_ros.nodes.bringup', '--rig', rig, '--cameras',
+         'cam_a', '--no-fusion', '--respawn', '--stop-timeout', '5', '--pose2d-param',
+         f'model.path:={tmp_path / "none.onnx"}'], stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    watchdog = threading.Timer(90.0, proc.send_signal, (signal.SIGINT,))
+    watchdog.start()
+    lines = []
+    try:
+        for line in proc.stderr:
+            lines.append(line)
+            if line.startswith('[bringup] restarting pose2d_node[cam_a] in 4 s'):
+                proc.send_signal(signal.SIGINT)        # the third exit: enough seen
+                break
+        _, rest = proc.communicate(timeout=60)
+    finally:
+        watchdog.cancel()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    text = ''.join(lines) + rest
+    delays = re.findall(r'\[bringup\] restarting pose2d_node\[cam_a\] in (\S+) s', text)
+    assert delays[:3] == ['1', '2', '4'], text[-3000:]
+    assert len(re.findall(r'\[bringup\] started pose2d_node\[cam_a\]', text)) == 3
+    died = r'pose2d_node\[cam_a\] died \(exit code 1\): .*none\.onnx'
+    assert len(re.findall(died, text)) == 3
+    assert 'exit codes' in text and proc.returncode == 1
 
 
 def test_bad_rig_and_cameras_fail_with_clear_messages(rig, tmp_path):

@@ -34,9 +34,11 @@ or SIGTERM stops all children: SIGINT to each, then SIGTERM after ``--stop-timeo
 SIGKILL. Child output is forwarded line by line. A child that dies stops everything and
 bringup exits 1 with a last line naming the node, its exit code and the last error line of its
 output (a rig with a silently missing camera is worse than a clear stop), unless ``--respawn``
-restarts it. Before starting the nodes, and before each restart, it removes the Fast DDS
-shared-memory files in /dev/shm of processes that are gone (``ros/shm.py``; 64 MB per killed
-process that published images), unless ``--keep-shm``.
+restarts it: after 1 s, and after twice the last delay (up to 30 s) while it keeps exiting
+within 30 s of its start, so a node that cannot start does not restart in a tight loop; the
+others are watched meanwhile. Before starting the nodes, and before each restart, it removes
+the Fast DDS shared-memory files in /dev/shm of processes that are gone (``ros/shm.py``; 64 MB
+per killed process that published images), unless ``--keep-shm``.
 
 Names: ``{camera}`` in ``--namespace`` and ``--image-topic`` is the camera's ROS name
 (``ros/names.py``: ``00_03`` -> ``cam00_03``); both are validated before anything starts. The
@@ -67,6 +69,10 @@ DEFAULT_PARAMS = ('config/pose2d.yaml', 'config/fusion.yaml')
 DEFAULT_IMAGE_TOPIC = '/{camera}/image_raw'
 DDS_PROFILE = 'config/fastdds_shm.xml'
 PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
+#: --respawn: first restart delay, its cap, and the uptime after which a node counts as stable
+RESPAWN_DELAY_S = 1.0
+RESPAWN_MAX_DELAY_S = 30.0
+RESPAWN_STABLE_S = 30.0
 
 
 def _executable(name: str) -> List[str]:
@@ -253,6 +259,8 @@ class Supervisor:
         self.log = log
         self.env = env
         self.procs: Dict[str, subprocess.Popen] = {}
+        self.started_at: Dict[str, float] = {}
+        self.quick_exits: Dict[str, int] = {}       # exits in a row within RESPAWN_STABLE_S
         self.tails: Dict[str, Deque[str]] = {}
         self._readers: Dict[str, threading.Thread] = {}
         self._log_lock = threading.Lock()
@@ -281,6 +289,7 @@ class Supervisor:
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 errors='replace', bufsize=1)
         self.procs[name] = proc
+        self.started_at[name] = time.monotonic()
         self.tails[name] = collections.deque(maxlen=40)
         self._readers[name] = threading.Thread(target=self._forward, args=(name, proc.stdout),
                                                daemon=True)
@@ -297,6 +306,13 @@ class Supervisor:
             self.say(f'removed {removed} Fast DDS shared-memory files ({freed / 2**20:.0f} MB) '
                      f'in {SHM_DIR} left by processes that are gone (--keep-shm keeps them)')
 
+    def respawn_delay(self, name: str) -> float:
+        """Return how long to wait before restarting ``name``, which has just exited."""
+        lived = time.monotonic() - self.started_at.get(name, 0.0)
+        quick = self.quick_exits.get(name, 0) + 1 if lived < RESPAWN_STABLE_S else 0
+        self.quick_exits[name] = quick
+        return min(RESPAWN_MAX_DELAY_S, RESPAWN_DELAY_S * 2 ** max(0, quick - 1))
+
     def _exit_text(self, name: str, code: int) -> str:
         self._readers[name].join(timeout=2.0)     # the output up to the exit
         how = (f'killed by {signal.Signals(-code).name}' if code < 0 else f'exit code {code}')
@@ -311,17 +327,23 @@ class Supervisor:
         self.remove_stale_shm()
         for name in self.commands:
             self.start(name)
+        restart_at: Dict[str, float] = {}
         while not self.stopping:
+            for name, due in list(restart_at.items()):
+                if time.monotonic() >= due and not self.stopping:
+                    del restart_at[name]
+                    self.remove_stale_shm()              # a crash leaves its segment behind
+                    self.start(name)
             for name, proc in list(self.procs.items()):
                 code = proc.poll()
-                if code is None or self.stopping:
+                if code is None or self.stopping or name in restart_at:
                     continue
                 text = self._exit_text(name, code)
                 self.say(text)
                 if self.respawn:
-                    time.sleep(1.0)
-                    self.remove_stale_shm()              # a crash leaves its segment behind
-                    self.start(name)
+                    delay = self.respawn_delay(name)
+                    restart_at[name] = time.monotonic() + delay
+                    self.say(f'restarting {name} in {delay:g} s (--respawn)')
                 else:
                     self.died[name] = text
                     self.say(f'stopping everything because {name} is gone (--respawn restarts '
@@ -395,7 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--foxglove', type=int, nargs='?', const=8765, default=None,
                    metavar='PORT', help='also start the live web view (mv3dpose_foxglove_view) '
                    'on ws://127.0.0.1:PORT (default 8765)')
-    p.add_argument('--respawn', action='store_true', help='restart nodes that exit')
+    p.add_argument('--respawn', action='store_true', help='restart nodes that exit (after 1 s, '
+                   'doubling up to 30 s while a node keeps exiting within 30 s)')
     p.add_argument('--keep-shm', action='store_true', help='do not remove the Fast DDS '
                    f'shared-memory files in {SHM_DIR} of processes that are gone (removed by '
                    'default at start and before each respawn)')
