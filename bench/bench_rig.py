@@ -164,19 +164,53 @@ class Probe:
         return {}
 
 
+def time_points(persons: Dict[int, Dict[str, int]]) -> Dict[int, Dict[int, Dict[str, int]]]:
+    """
+    Group the inferred stamps into time points: ``{first stamp: {stamp: {camera: arrival}}}``.
+
+    Cameras of one rig infer the same instants, but publishers that cannot keep up (a video
+    decoded on a busy CPU) skip different instants, so a grid window's first image can be a
+    frame or two apart between cameras, and ``fusion_node`` still makes one set of them (its
+    slop is half the set period). Stamps closer than half of the shortest per-camera median
+    step between inferred images are one time point, one stamp per camera; exact stamps
+    otherwise.
+    """
+    steps = []
+    for cam in {c for cams in persons.values() for c in cams}:
+        mine = sorted(s for s, cams in persons.items() if cam in cams)
+        if len(mine) > 2:
+            steps.append(sorted(b - a for a, b in zip(mine, mine[1:]))[(len(mine) - 1) // 2])
+    tolerance = min(steps) // 2 if steps else 0
+    out: Dict[int, Dict[int, Dict[str, int]]] = {}
+    first = None
+    for stamp in sorted(persons):
+        cams = persons[stamp]
+        group = out.get(first) if first is not None else None
+        if group is None or stamp - first >= tolerance or any(
+                c in members for members in group.values() for c in cams):
+            first = stamp
+            out[first] = {}
+        out[first][stamp] = cams
+    return out
+
+
 def analyse(probe: Probe, start_ns: int, end_ns: int, max_wait_s: float,
             min_views: int = 2) -> dict:
-    """Figures of the time points stamped within ``[start_ns, end_ns]``."""
+    """Figures of the time points (``time_points``) stamped within ``[start_ns, end_ns]``."""
     with probe.lock:
-        persons = {s: dict(c) for s, c in probe.persons.items() if start_ns <= s <= end_ns}
+        inferred = {s: dict(c) for s, c in probe.persons.items() if start_ns <= s <= end_ns}
         tracks = [t for t in probe.tracks if start_ns <= t[0] <= end_ns]
+    groups = time_points(inferred)
+    persons = {first: {c: t for cams in g.values() for c, t in cams.items()}
+               for first, g in groups.items()}
+    point_of = {stamp: first for first, g in groups.items() for stamp in g}
     processable = {s: c for s, c in persons.items() if len(c) >= min_views}
-    emitted = {t[0] for t in tracks}
+    emitted = {point_of[t[0]] for t in tracks if t[0] in point_of}
     skew = {s: (max(c.values()) - min(c.values())) / NS for s, c in processable.items()}
     within = [s for s in processable if skew[s] <= max_wait_s]
     first_arrival: Dict[int, int] = {}      # per set stamp (not idle / coasting updates)
     for stamp, arr, _, _ in tracks:
-        if stamp in persons:
+        if stamp in point_of:
             first_arrival.setdefault(stamp, arr)
     latency = sorted((arr - stamp) / 1e6 for stamp, arr in first_arrival.items())
 
