@@ -45,6 +45,7 @@ model finds 0-2 of the 3 then.)
 """
 
 import argparse
+import bisect
 import os
 import signal
 import subprocess
@@ -203,14 +204,20 @@ def analyse(probe: Probe, start_ns: int, end_ns: int, max_wait_s: float,
     groups = time_points(inferred)
     persons = {first: {c: t for cams in g.values() for c, t in cams.items()}
                for first, g in groups.items()}
-    point_of = {stamp: first for first, g in groups.items() for stamp in g}
+    spans = sorted((min(g), max(g), first) for first, g in groups.items())
+
+    def point_of(stamp: int) -> Optional[int]:
+        """Return the time point of a set stamp (the mean of its members' stamps)."""
+        i = bisect.bisect_right(spans, (stamp, float('inf'), 0)) - 1
+        return spans[i][2] if i >= 0 and spans[i][0] <= stamp <= spans[i][1] else None
+
     processable = {s: c for s, c in persons.items() if len(c) >= min_views}
-    emitted = {point_of[t[0]] for t in tracks if t[0] in point_of}
+    emitted = {point_of(t[0]) for t in tracks} - {None}
     skew = {s: (max(c.values()) - min(c.values())) / NS for s, c in processable.items()}
     within = [s for s in processable if skew[s] <= max_wait_s]
     first_arrival: Dict[int, int] = {}      # per set stamp (not idle / coasting updates)
     for stamp, arr, _, _ in tracks:
-        if stamp in point_of:
+        if point_of(stamp) is not None:
             first_arrival.setdefault(stamp, arr)
     latency = sorted((arr - stamp) / 1e6 for stamp, arr in first_arrival.items())
 
