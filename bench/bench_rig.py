@@ -21,8 +21,9 @@ time); ``mv3dpose_bringup`` starts one ``pose2d_node`` per camera and ``fusion_n
 defaults. A probe records every ``persons_2d`` (which images inference processed, and when),
 every ``~/tracks`` message and ``/diagnostics``. Printed at the end:
 
-- sets emitted among the time points inference could process (>= 2 cameras' ``persons_2d``),
-  also among those whose inference skew between cameras stayed within ``sync.max_wait_s``;
+- sets emitted among the time points inference could process (>= 2 cameras' ``persons_2d``;
+  a time point groups stamps within half the inference period, see ``time_points``), also
+  among those whose inference skew between cameras stayed within ``sync.max_wait_s``;
 - per camera: frames published / skipped, received and dropped by pose2d (newer image
   arrived = overload), dropped or rejected by fusion, by reason;
 - capture -> tracks latency (probe receipt - capture stamp) p50 / p95, and when the first
