@@ -50,10 +50,15 @@ def test_only_files_whose_lock_nobody_holds_are_stale(tmp_path):
     _touch(tmp_path / 'fastrtps_port7411_sl')
     _touch(tmp_path / 'sem.fastrtps_port7411_mutex', 32)
     _touch(tmp_path / 'fastrtps_port7413')                  # no lock file: cannot tell, kept
+    _touch(tmp_path / 'fastrtps_port7415')                  # one of its two locks is held
+    _touch(tmp_path / 'fastrtps_port7415_el')
+    _touch(tmp_path / 'fastrtps_port7415_sl')
     _touch(tmp_path / 'lttng-ust-wait-8')
     holder = open(tmp_path / f'{alive}_el', 'rb')       # another open file: a live owner
+    sharer = open(tmp_path / 'fastrtps_port7415_sl', 'rb')
     try:
         fcntl.flock(holder, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(sharer, fcntl.LOCK_SH | fcntl.LOCK_NB)
         assert is_locked(str(tmp_path / f'{alive}_el'))
         assert not is_locked(str(tmp_path / f'{dead}_el'))
         assert sorted(os.path.basename(p) for p in stale_files(str(tmp_path))) == sorted([
@@ -62,11 +67,15 @@ def test_only_files_whose_lock_nobody_holds_are_stale(tmp_path):
         assert clean_stale_files(str(tmp_path)) == (5, 1032)
         assert sorted(os.listdir(tmp_path)) == sorted([
             alive, f'{alive}_el', young, f'{young}_el', 'fastrtps_port7413',
+            'fastrtps_port7415', 'fastrtps_port7415_el', 'fastrtps_port7415_sl',
             'lttng-ust-wait-8'])
         assert is_locked(str(tmp_path / f'{alive}_el'))      # the probe left the lock alone
     finally:
         holder.close()
-    assert [os.path.basename(p) for p in stale_files(str(tmp_path))] == [f'{alive}_el', alive]
+        sharer.close()
+    assert sorted(os.path.basename(p) for p in stale_files(str(tmp_path))) == sorted([
+        alive, f'{alive}_el', 'fastrtps_port7415', 'fastrtps_port7415_el',
+        'fastrtps_port7415_sl', 'sem.fastrtps_port7415_mutex'])
     assert clean_stale_files(str(tmp_path / 'missing')) == (0, 0)
 
 

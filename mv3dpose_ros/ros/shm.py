@@ -23,16 +23,16 @@ files; one that is killed (SIGKILL, a crash, an out-of-memory kill) leaves them,
 in the PyPI wheels removes them (Fast DDS's ``fastdds shm clean`` is not there). A rig whose
 nodes crash and respawn would fill /dev/shm (64 MB in Docker by default), after which new
 processes fall back to UDP and lose HD images. ``clean_stale_files`` removes the files of
-segments and ports whose lock nobody holds, as ``fastdds shm clean`` does, and only lock files
-older than ``min_age_s``, so a process that has just created its segment and not yet locked
-it keeps it.
+segments and ports none of whose locks anybody holds (as ``fastdds shm clean`` does, which
+judges each lock file alone), and only lock files older than ``min_age_s``, so a process that
+has just created its segment and not yet locked it keeps it.
 """
 
 import fcntl
 import os
 import re
 import time
-from typing import List, Mapping, Optional, Tuple
+from typing import Dict, List, Mapping, Optional, Tuple
 
 SHM_DIR = '/dev/shm'
 #: lock files younger than this are left alone (their owner may be about to lock them)
@@ -64,29 +64,33 @@ def is_locked(path: str) -> bool:
 
 def stale_files(shm_dir: str = SHM_DIR, min_age_s: float = MIN_AGE_S,
                 now_s: Optional[float] = None) -> List[str]:
-    """Return the paths of Fast DDS segment and port files whose owners are all gone."""
+    """
+    Return the paths of Fast DDS segment and port files whose owners are all gone.
+
+    A segment or port is stale when none of its lock files (``_el``, ``_sl``) is held and all
+    are older than ``min_age_s``; its lock files, the segment and, for a port, the semaphore
+    are returned.
+    """
     try:
         names = os.listdir(shm_dir)
     except OSError:
         return []
     now_s = time.time() if now_s is None else now_s
-    out: List[str] = []
+    locks: Dict[str, List[str]] = {}
     for name in sorted(names):
-        segment = _SEGMENT_LOCK.match(name)
-        port = _PORT_LOCK.match(name)
-        if not (segment or port):
-            continue
-        lock = os.path.join(shm_dir, name)
+        if _SEGMENT_LOCK.match(name) or _PORT_LOCK.match(name):
+            locks.setdefault(name[:-3], []).append(os.path.join(shm_dir, name))
+    out: List[str] = []
+    for base, paths in locks.items():
         try:
-            if now_s - os.stat(lock).st_mtime < min_age_s:
+            if any(now_s - os.stat(p).st_mtime < min_age_s for p in paths):
                 continue
         except OSError:
             continue
-        if is_locked(lock):
+        if any(is_locked(p) for p in paths):
             continue
-        base = name[:-3]
-        out += [lock, os.path.join(shm_dir, base)]
-        if port:
+        out += paths + [os.path.join(shm_dir, base)]
+        if base.startswith('fastrtps_port'):
             out.append(os.path.join(shm_dir, f'sem.{base}_mutex'))
     return out
 
