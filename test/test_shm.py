@@ -77,6 +77,9 @@ def test_only_files_whose_lock_nobody_holds_are_stale(tmp_path):
         alive, f'{alive}_el', 'fastrtps_port7415', 'fastrtps_port7415_el',
         'fastrtps_port7415_sl', 'sem.fastrtps_port7415_mutex'])
     assert clean_stale_files(str(tmp_path / 'missing')) == (0, 0)
+    assert not is_locked(str(tmp_path / 'missing_el'))
+    _touch(tmp_path / 'plain')
+    assert is_locked(str(tmp_path / 'plain' / 'x_el'))     # cannot be opened: kept
 
 
 def test_fast_dds_is_the_rmw_unless_another_is_chosen():

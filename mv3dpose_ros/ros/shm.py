@@ -48,11 +48,13 @@ def uses_fast_dds(environ: Mapping[str, str] = os.environ) -> bool:
 
 
 def is_locked(path: str) -> bool:
-    """Tell whether some process holds a lock on ``path`` (a missing file is not locked)."""
+    """Tell whether some process may hold a lock on ``path`` (missing: no; unreadable: yes)."""
     try:
         fd = os.open(path, os.O_RDONLY)
-    except OSError:
+    except FileNotFoundError:
         return False
+    except OSError:
+        return True                                  # cannot tell: keep it
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
