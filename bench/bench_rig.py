@@ -30,7 +30,7 @@ every ``~/tracks`` message and ``/diagnostics``. Printed at the end:
   tracks message with N confirmed people arrived.
 
     python bench/bench_rig.py [--cameras 4] [--rate 10] [--duration 60] [--compressed jpeg]
-                              [--video]
+                              [--video] [--portrait]
 
 ``--video`` replays a recorded video rig instead: each camera's frames are first written as an
 MPEG-4 video (each time point ``--hold`` s long; kept in the temp folder for the next run) and
