@@ -36,7 +36,7 @@ every ``~/tracks`` message and ``/diagnostics``. Printed at the end:
 MPEG-4 video (each time point ``--hold`` s long; kept in the temp folder for the next run) and
 the publishers read the videos, as a user replays the videos of a recorded rig.
 
-``--portrait`` makes portrait cameras of them: each frame's 9:16 window around the scene
+``--portrait`` makes portrait cameras of them: each frame's 9:16 window around the people
 is scaled to 1080x1920 (people upright, as a phone or a camera mounted for portrait records
 them) with the matching intrinsics, so the same real scene runs through the portrait model
 sizes. (Turning the frames a quarter turn instead would lay the people on their side: the
@@ -287,9 +287,9 @@ def portrait_rig(cams: Sequence[str]) -> Tuple[str, str]:
     import numpy as np
     from mv3dpose_ros.core.calibration import load_calibration, save_rig_yaml
     from mv3dpose_ros.core.camera import Camera
-    folder = os.path.join(tempfile.gettempdir(), 'bench_rig_portrait')
     from mv3dpose_ros.pose2d.estimator import open_estimator
     from mv3dpose_ros.pose2d.models import resolve_model_path
+    folder = os.path.join(tempfile.gettempdir(), 'bench_rig_portrait')
     rig = load_calibration(CALIBRATION, cameras=cams)
     estimator = open_estimator(resolve_model_path('yolo11n-pose', '384x640'), threads=1)
     out_w, out_h = 1080, 1920
