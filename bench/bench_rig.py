@@ -296,10 +296,12 @@ def portrait_rig(cams: Sequence[str]) -> Tuple[str, str]:
     portrait = {}
     for cam, c in rig.items():
         crop_w = int(round(c.height * out_w / out_h))
-        names = sorted(os.listdir(os.path.join(DEMO, cam)))
+        images = {name: cv2.imread(os.path.join(DEMO, cam, name))
+                  for name in sorted(os.listdir(os.path.join(DEMO, cam)))}
+        images = {name: image for name, image in images.items() if image is not None}
         centres = []
-        for name in names:
-            found = estimator.infer(cv2.imread(os.path.join(DEMO, cam, name)))
+        for image in images.values():
+            found = estimator.infer(image)
             centres += [(b[0] + b[2]) / 2 for b, p in zip(found.boxes, found.scores) if p >= 0.5]
         u = float(np.median(centres)) if centres else c.width / 2
         x0 = int(min(max(0, round(u - crop_w / 2)), c.width - crop_w))
@@ -312,10 +314,9 @@ def portrait_rig(cams: Sequence[str]) -> Tuple[str, str]:
         portrait[cam] = Camera(cam, K, c.dist, c.R, c.t, out_w, out_h)
         out = os.path.join(folder, cam)
         os.makedirs(out, exist_ok=True)
-        for name in sorted(os.listdir(os.path.join(DEMO, cam))):
+        for name, image in images.items():
             target = os.path.join(out, name)
-            image = None if os.path.exists(target) else cv2.imread(os.path.join(DEMO, cam, name))
-            if image is not None:
+            if not os.path.exists(target):
                 cv2.imwrite(target, cv2.resize(image[:, x0:x0 + crop_w], (out_w, out_h),
                                                interpolation=cv2.INTER_LINEAR))
     path = os.path.join(folder, 'rig.yaml')
