@@ -145,6 +145,17 @@ class Probe:
             hist[key] = hist.get(key, 0) + 1
         return sum(c >= people for c, _ in window), len(window), hist
 
+    def confirmed_by_time_point(self, since_ns: int, until_ns: int, slot_ns: int,
+                                frames: int) -> Dict[int, Dict[int, int]]:
+        """Per time point shown (stamp // slot mod frames): confirmed people -> messages."""
+        with self.lock:
+            window = [(s, c) for s, t, c, _ in self.tracks if since_ns <= t <= until_ns]
+        out: Dict[int, Dict[int, int]] = {}
+        for stamp, confirmed in window:
+            hist = out.setdefault(stamp // slot_ns % frames, {})
+            hist[confirmed] = hist.get(confirmed, 0) + 1
+        return out
+
     def cameras_answering(self) -> int:
         """Return how many cameras have published persons_2d so far."""
         with self.lock:
@@ -462,6 +473,10 @@ def main() -> int:
         t_end = time.time_ns() - 2 * NS
         first = probe.first_confirmed(args.people, t_start)
         share = probe.confirmed_share(args.people, t_ready + int(args.warmup * NS), t_end)
+        names = sorted(os.listdir(os.path.join(DEMO, cams[0])))
+        by_point = probe.confirmed_by_time_point(
+            t_ready + int(args.warmup * NS), t_end, int(args.hold * NS), len(names)
+        ) if args.hold else {}
     finally:
         stop(procs[1:])
         stop(procs[:1])
@@ -494,6 +509,9 @@ def main() -> int:
           f'{share[0]} of {share[1]}{pct}{held}')
     print('  (confirmed, published skeletons): messages  '
           + ', '.join(f'{k}: {v}' for k, v in sorted(share[2].items())))
+    for point, hist in sorted(by_point.items()):
+        print(f'  time point {point} ({names[point]}): confirmed people -> messages  '
+              + ', '.join(f'{k}: {v}' for k, v in sorted(hist.items())))
     print('per camera (whole run):')
     print('\n'.join(drop_table(probe, published)))
     return 0
