@@ -28,6 +28,8 @@ count and execution provider:
   the previous inference), decode, pre, inference, post, publish, fusion (``Fusion.step``);
 - drops by stage: lost before pose2d (published - received: DDS / QoS), pose2d newest-only
   (replaced before inference), fusion synchroniser (dropped by sync);
+- the sets fusion_node emitted, how many were partial and how many of those went on a
+  camera's skip notice (``persons_2d/skipped``) instead of waiting out ``sync.max_wait_s``;
 - people found: skeletons observed in each tracks message (``last_observed`` = the set's
   stamp), per time point: the share of sets with all 3 Panoptic people, and the minimum.
 
@@ -257,6 +259,9 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     dropped_pose = sum(int(d.get('Dropped before inference (newer image arrived)', 0))
                        for d in pose)
     dropped_sync = sum(int(d.get('dropped by sync', 0)) for d in diags.values())
+    sets = [v for v in diags.values() if 'sets emitted' in v]
+    sets = {k: int(float(sets[0].get(k, 0))) if sets else 0 for k in (
+        'sets emitted', 'partial sets', 'partial sets decided on skip notices')}
     per_point = {}
     for point, seen in observed:
         per_point.setdefault(point, []).append(seen)
@@ -268,7 +273,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         'published_rate': sets_published / window, 'tracks_rate': len(latency) / window,
         'p50': _percentile(latency, 50), 'p95': _percentile(latency, 95), 'inside': inside,
         'stage': stage, 'published_images': published * len(cameras), 'received': received,
-        'dropped_pose2d': dropped_pose, 'dropped_sync': dropped_sync,
+        'dropped_pose2d': dropped_pose, 'dropped_sync': dropped_sync, 'sets': sets,
         'people': {p: (sum(1 for n in v if n >= 3), len(v), min(v)) for p, v in
                    sorted(per_point.items())},
         'threads': [d.get('Intra-op threads', '?') for d in pose][:1],
@@ -296,6 +301,11 @@ def _print(r: dict) -> None:
           f'pose2d newest-only {r["dropped_pose2d"]}, fusion sync {r["dropped_sync"]}; '
           f'{r["other"]} outputs not stamped like a published set (idle steps) not counted',
           flush=True)
+    if r['cameras'] > 1:
+        s = r['sets']
+        print(f'  sets (whole run): {s["sets emitted"]} emitted, {s["partial sets"]} partial, '
+              f'{s["partial sets decided on skip notices"]} of them on a skip notice '
+              '(persons_2d/skipped)', flush=True)
     print(f'  people: {"sets" if r["cameras"] > 1 else "images"} with all 3 observed '
           f'{full}/{sets}; per time point {people}', flush=True)
 

@@ -29,7 +29,7 @@ import time
 
 from conftest import interrupt
 from diagnostic_msgs.msg import DiagnosticArray
-from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
+from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.fusion import Fusion, FusionConfig
 from mv3dpose_ros.core.types import TrackState
@@ -629,6 +629,44 @@ def test_set_short_of_a_camera_released_when_its_wait_runs_out_without_new_input
     assert h.node.counts['partial_sets'] == 1 and h.node.sync.stats['cam_04'].missing == 1
     assert sum(t.state == TrackState.CONFIRMED for t in last.skeletons) == scene.num_people
     assert h.node.sync.pending() == 0 and h.node._release_timer.is_canceled()
+
+
+def test_set_short_of_a_camera_goes_at_once_when_the_camera_announces_the_skip(
+        harness_factory, scene):
+    """pose2d_node's SkippedImages: a set stops waiting for the image a camera never infers."""
+    h = harness_factory(**{'sync.max_wait_s': 5.0, 'sync.max_wait_cap_s': 5.0})
+    notes = h.probe.create_publisher(SkippedImages, '/cam_04/persons_2d/skipped',
+                                     reliable_qos(10))
+    assert h.spin_until(lambda: notes.get_subscription_count() > 0)
+    t0 = base_ns(14)
+    stamp = [t0 + int(round(f * NS / FPS)) for f in range(14)]
+    for cam, msg, _ in stream(scene, t0, range(10)):
+        h.publish(cam, msg)
+    assert h.wait_sets(10)
+    for cam, msg, _ in stream(scene, t0, [10], skip=lambda c, f: c == 'cam_04'):
+        h.publish(cam, msg)
+    h.spin_for(0.3)
+    assert h.node.counts['sets'] == 10        # waiting up to 5 s for cam_04's frame 10
+    # cam_04 replaced frame 10 with frame 11 before inference and says so (its frame 9 was
+    # the last it published). A malformed notice first: dropped, counted, nothing decided.
+    notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[9])),
+                                camera_id='cam_04', after=ns_to_stamp(stamp[11])))
+    h.spin_for(0.2)
+    assert h.node.counts['sets'] == 10 and h.node.cams['cam_04'].skips_rejected == 1
+    t_note = time.monotonic()
+    notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[11])),
+                                camera_id='cam_04', after=ns_to_stamp(stamp[9])))
+    assert h.wait_sets(11, timeout=2.5), 'the set still waited for the skipped image'
+    assert time.monotonic() - t_note < 2.5
+    assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[10]
+    assert h.node.sync.stats['cam_04'].missing == 1 and h.node.cams['cam_04'].skips == 1
+    assert h.node.sync.decisions['skipped (announced)'] == 1
+    # Frame 11 then completes its set as usual; a skip never covers its own end stamps.
+    for cam, msg, _ in stream(scene, t0, [11]):
+        h.publish(cam, msg)
+    assert h.wait_sets(12)
+    assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[11]
+    assert h.node.counts['partial_sets'] == 1
 
 
 def test_tracks_deleted_when_every_input_stops(harness_factory, scene):

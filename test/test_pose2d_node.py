@@ -31,7 +31,7 @@ import time
 from conftest import spin_until
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
-from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
+from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
 from mv3dpose_ros.pose2d import models
 from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
 from mv3dpose_ros.pose2d.ops import Letterbox
@@ -684,6 +684,62 @@ def test_grid_mode_takes_few_images_and_infers_each_window_first(tmp_path, ros_c
         # and only about two of its ten images are copied out of DDS
         assert node.taken <= node.received // 2, (node.taken, node.received)
         assert node.skipped + node.processed + node.dropped == node.received
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+
+
+def test_images_never_inferred_are_announced_before_the_next_persons(tmp_path, ros_context):
+    """
+    Real DDS: persons_2d/skipped names the stamps no persons will come for, ahead of them.
+
+    A 20 Hz camera on a 2 Hz grid: each window's first image is inferred and the nine after it
+    are not, so every Person2DArray follows a SkippedImages from the one before (0 first),
+    and no Person2DArray is stamped inside an announced gap.
+    """
+    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    model, _ = _crafted_model(tmp_path)
+    node = Pose2DNode(context=ros_context, namespace='/gaps', cli_args=REMAP,
+                      parameter_overrides=[
+                          Parameter('model.path', value=model),
+                          Parameter('model.threads', value=1),
+                          Parameter('image_qos.reliability', value='reliable'),
+                          Parameter('inference_rate_hz', value=2.0),
+                          Parameter('rig_rate_topic', value='')])
+    probe = rclpy.create_node('gaps_probe', context=ros_context)
+    events = []
+    probe.create_subscription(Person2DArray, '/gaps/persons_2d',
+                              lambda m: events.append(('persons', stamp_to_ns(m.header.stamp))),
+                              reliable_qos(50))
+    probe.create_subscription(SkippedImages, '/gaps/persons_2d/skipped',
+                              lambda m: events.append(('skipped', stamp_to_ns(m.after),
+                                                       stamp_to_ns(m.header.stamp),
+                                                       m.camera_id)),
+                              reliable_qos(50))
+    pub = probe.create_publisher(Image, '/gaps/image_raw', reliable_qos(5))
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    ex.add_node(probe)
+    img = np.zeros((H, W, 3), np.uint8)
+    try:
+        assert node.active
+        assert spin_until(ex, lambda: pub.get_subscription_count() > 0, 10.0)
+        base = (time.time_ns() // NS + 2) * NS
+        t0 = time.monotonic()
+        for k in range(60):                          # 3 s of a 20 Hz camera, paced
+            pub.publish(numpy_to_image(img, Header(stamp=ns_to_stamp(base + k * 50_000_000),
+                                                   frame_id='f'), 'bgr8'))
+            while time.monotonic() < t0 + (k + 1) * 0.05:
+                ex.spin_once(timeout_sec=0.01)
+        assert spin_until(ex, lambda: node.received >= 60, 5.0), node.received
+        spin_until(ex, lambda: False, 0.5)
+        persons = [e[1] for e in events if e[0] == 'persons']
+        notes = [e[1:] for e in events if e[0] == 'skipped']
+        assert len(persons) >= 4, events
+        assert notes == [(prev, cur, 'gaps') for prev, cur in zip([0] + persons, persons)], \
+            events
+        assert node.skips_announced == len(notes)
     finally:
         ex.shutdown()
         node.destroy_node()

@@ -557,3 +557,64 @@ def test_waking_at_next_decision_is_never_late(seed):
     assert len(out) >= 0.9 * sum(1 for n in views.values() if n >= 2)   # frames of 2 cameras
     assert partial > 40                        # waits ran out
     assert wakes < 2 * partial                 # a wake per set that waited, not a poll
+
+
+def test_announced_skip_lets_a_set_go_when_its_last_real_message_arrives():
+    """A camera whose image was replaced says so: its set no longer waits max_wait for it."""
+    sync = make(max_wait_s=0.1)
+    feed(sync, flat(frames(8)))                          # periods known, all complete
+    f = 8
+    stamp = T0 + f * PERIOD
+    arrival = stamp - T0 + LATENCY
+    # cam2 skips frame 8 (replaced while its model was busy) and says so when it takes frame 9;
+    # cam0 and cam1 deliver frame 8 first.
+    assert feed(sync, [('cam0', stamp, arrival), ('cam1', stamp, arrival + MS)]) == []
+    sets = sync.skip('cam2', T0 + 7 * PERIOD, T0 + 9 * PERIOD, arrival + 2 * MS)
+    assert [s.missing for s in sets] == [('cam2',)] and sets[0].stamp_ns == stamp
+    assert sync.decisions['skipped (announced)'] == 1
+
+
+def test_announced_skip_before_the_other_results_closes_the_set_on_the_last_of_them():
+    sync = make(max_wait_s=0.1)
+    feed(sync, flat(frames(8)))
+    stamp = T0 + 8 * PERIOD
+    arrival = stamp - T0 + LATENCY
+    assert sync.skip('cam2', T0 + 7 * PERIOD, T0 + 9 * PERIOD, arrival) == []   # nothing pending
+    assert feed(sync, [('cam0', stamp, arrival + MS)]) == []                    # cam1 may come
+    got = feed(sync, [('cam1', stamp, arrival + 30 * MS)])
+    assert len(got) == 1 and got[0].missing == ('cam2',)
+
+
+def test_skip_does_not_cover_its_own_end_stamps():
+    """Only stamps strictly between: the images at both ends have (or will have) results."""
+    sync = make(max_wait_s=0.1)
+    feed(sync, flat(frames(8)))
+    stamp = T0 + 8 * PERIOD
+    arrival = stamp - T0 + LATENCY
+    feed(sync, [('cam0', stamp, arrival), ('cam1', stamp, arrival)])
+    # cam2 announces a gap ending at frame 8 itself: frame 8's result is still coming.
+    assert sync.skip('cam2', T0 + 6 * PERIOD, stamp, arrival + MS) == []
+    assert sync.skip('cam2', stamp, T0 + 10 * PERIOD, arrival + MS) == []
+    got = feed(sync, [('cam2', stamp, arrival + 50 * MS)])
+    assert len(got) == 1 and got[0].complete
+
+
+def test_skip_rejects_unknown_cameras_and_empty_intervals():
+    sync = make()
+    with pytest.raises(ValueError, match='unknown camera'):
+        sync.skip('nope', 0, 1)
+    with pytest.raises(ValueError, match='after < before'):
+        sync.skip('cam0', 5, 5)
+    with pytest.raises(ValueError, match='after < before'):
+        sync.skip('cam0', -1, 5)
+
+
+def test_reset_forgets_announced_skips():
+    sync = make(max_wait_s=0.1)
+    feed(sync, flat(frames(8)))
+    sync.skip('cam2', T0 + 7 * PERIOD, T0 + 9 * PERIOD, 0)
+    sync.reset()
+    feed(sync, flat(frames(8)))
+    stamp = T0 + 8 * PERIOD
+    arrival = stamp - T0 + LATENCY
+    assert feed(sync, [('cam0', stamp, arrival), ('cam1', stamp, arrival)]) == []

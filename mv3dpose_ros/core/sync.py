@@ -32,6 +32,10 @@ cameras whose inference finishes at different times lose no set:
   more than ``max_wait`` before the pivot. Then it is emitted as a
   partial set when at least ``min_views`` cameras contributed, otherwise its messages are
   dropped (``pivots_dropped``). ``poll(now)`` applies the wait when no message arrives.
+* A camera may announce images it will send nothing for (``skip``: stamps strictly between
+  two of its images, e.g. replaced by a newer image while its model was busy). A set waits
+  for no camera whose announced gap holds its window, so it goes as soon as its last real
+  message arrives instead of after ``max_wait``.
 * The slop adapts to the cameras: each camera's frame period is the median of its recent
   stamp steps, and the slop used is at most half of the shortest period (a wider slop would
   merge consecutive frames of a camera and drop every other one). ``slop_s`` 0 means
@@ -82,6 +86,8 @@ SPREAD_FACTOR = 1.3
 DECIDED_WINDOW = 64
 #: Accepted messages whose capture -> arrival delay sets the stream time (the shortest).
 OFFSET_WINDOW = 64
+#: Announced gaps kept per camera (only those around the pending sets matter).
+GAP_WINDOW = 16
 
 
 @dataclass
@@ -255,6 +261,8 @@ class StreamSynchronizer:
         self._offsets: Deque[int] = deque(maxlen=OFFSET_WINDOW)   # arrival - stamp, recent
         self._first_arrival_ns: Optional[int] = None
         self._last_accepted_arrival: Dict[str, Optional[int]] = dict.fromkeys(ids)
+        self._gaps: Dict[str, Deque[Tuple[int, int]]] = {
+            c: deque(maxlen=GAP_WINDOW) for c in ids}
         self.slop_ns = self._slop_cfg or int(INITIAL_SLOP_S * NS_PER_S)
         self.frame_period_ns: Optional[int] = None   # shortest camera period seen now
         self.slop_note = ''                          # set once when slop_s had to be narrowed
@@ -313,6 +321,25 @@ class StreamSynchronizer:
         """Count a stamp the caller dropped before ``add`` (rate and gap statistics only)."""
         self.stats[camera_id].observe_step(int(stamp_ns))
 
+    def skip(self, camera_id: str, after_ns: int, before_ns: int,
+             now_ns: Optional[int] = None) -> List[SyncedSet]:
+        """
+        Record that ``camera_id`` sends nothing stamped strictly between the two stamps.
+
+        Returns the sets this lets go (those that waited only for that camera). Raises
+        ``ValueError`` for an unknown camera or an empty interval.
+        """
+        if camera_id not in self._gaps:
+            raise ValueError(f'unknown camera id {camera_id!r} (configured: '
+                             f'{", ".join(self.camera_ids)})')
+        after_ns, before_ns = int(after_ns), int(before_ns)
+        if not 0 <= after_ns < before_ns:
+            raise ValueError(f'camera {camera_id!r}: skipped images between '
+                             f'{after_ns / NS_PER_S:.6f} s and {before_ns / NS_PER_S:.6f} s: '
+                             'the interval must be 0 <= after < before')
+        self._gaps[camera_id].append((after_ns, before_ns))
+        return self.poll(now_ns)
+
     def poll(self, now_ns: Optional[int] = None) -> List[SyncedSet]:
         """Decide the sets whose wait has run out at ``now_ns`` (call it on a timer)."""
         return self._process(int(self._clock() if now_ns is None else now_ns))
@@ -339,6 +366,8 @@ class StreamSynchronizer:
         self._ref = None
         self._offsets.clear()
         self._decided.clear()                        # stamps start again; spreads are kept
+        for gaps in self._gaps.values():
+            gaps.clear()
         self.resets += 1
 
     def pending(self) -> int:
@@ -530,12 +559,20 @@ class StreamSynchronizer:
                 first = arrival if first is None else min(first, arrival)
         return chosen, first if first is not None else 0
 
-    def _may_still_come(self, chosen: Dict[str, int], pivot: int, now: int) -> bool:
-        """Whether a camera missing from the pivot's set can still send a message for it."""
+    def _may_still_come(self, chosen: Dict[str, int], pivot: int, now: int) -> Optional[str]:
+        """
+        Return None while a camera missing from the pivot's set can still send for it.
+
+        Else why none can: 'skipped' when a camera's announced gap holds the window.
+        """
         hi = pivot + self.slop_ns
+        reason = 'no camera can still come'
         for cam in self.camera_ids:
             if cam in chosen:
                 continue
+            if any(after < pivot and hi < before for after, before in self._gaps[cam]):
+                reason = 'skipped (announced)'
+                continue                             # it said it sends nothing in the window
             st = self.stats[cam]
             last_arrival = self._last_accepted_arrival[cam]
             if last_arrival is None:                 # nothing usable yet: silent since start
@@ -557,8 +594,8 @@ class StreamSynchronizer:
             if period and latest is not None and latest < pivot and \
                     latest + period - tol > hi:
                 continue                             # its next frame falls after the window
-            return True
-        return False
+            return None
+        return reason
 
     def _process(self, now: int, flush: bool = False) -> List[SyncedSet]:
         """Emit or drop pivots while they are decided; ``flush`` decides everything."""
@@ -574,10 +611,11 @@ class StreamSynchronizer:
                     self.decisions['queue full'] += 1
                 elif now - first_arrival >= self.max_wait_ns:
                     self.decisions['waited max_wait'] += 1
-                elif self._may_still_come(chosen, pivot, now):
-                    return out
                 else:
-                    self.decisions['no camera can still come'] += 1
+                    why = self._may_still_come(chosen, pivot, now)
+                    if why is None:
+                        return out
+                    self.decisions[why] += 1
             self._remember(pivot, chosen, first_arrival, flush)
             if len(chosen) >= self.config.min_views:
                 out.append(self._emit(pivot, chosen))

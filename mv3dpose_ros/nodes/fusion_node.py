@@ -39,7 +39,7 @@ import time
 from typing import Any, Dict, List, Optional, Union
 
 from geometry_msgs.msg import PoseArray
-from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, TrackedSkeletonArray
+from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.fusion import Fusion, FusionConfig
@@ -115,6 +115,8 @@ class _Camera:
         self.size_problem = ''                 # last message's size disagreed with calibration
         self.info_problem = ''                 # the CameraInfo was rejected
         self.camera_info_received = False
+        self.skips = 0                         # SkippedImages notices taken
+        self.skips_rejected = 0                # ... and refused (bad stamps)
 
     @property
     def calibration_problem(self) -> str:
@@ -205,7 +207,14 @@ class FusionNode(Node):
             self._subs.append(self.create_subscription(
                 Person2DArray, topic, lambda msg, c=cam: self._on_persons(c, msg), in_qos,
                 event_callbacks=subscription_events(self, topic, in_qos), raw=True))
-            self.get_logger().info(f'input {cam}: {state.topic} [{describe(in_qos)}]')
+            # pose2d_node announces the images it will send no persons for: sets stop
+            # waiting for them (SkippedImages.msg).
+            skipped = f'{state.topic}/skipped'
+            self._subs.append(self.create_subscription(
+                SkippedImages, skipped, lambda msg, c=cam: self._on_skipped(c, msg),
+                reliable_qos(10)))
+            self.get_logger().info(f'input {cam}: {state.topic} [{describe(in_qos)}], '
+                                   f'{skipped}')
         if self.intrinsics_source == 'camera_info':
             info_qos = sensor_qos('best_effort', 1)
             for cam in self.camera_ids:
@@ -594,6 +603,25 @@ class FusionNode(Node):
                 self._process(synced)
             self._release(arrival)     # after a late message too (add decides nothing then)
 
+    def _on_skipped(self, cam: str, msg: SkippedImages) -> None:
+        """Stop waiting for the camera's images it announces it sends no persons for."""
+        with self._lock:
+            state = self.cams[cam]
+            before, after = stamp_to_ns(msg.header.stamp), stamp_to_ns(msg.after)
+            if not 0 <= after < before:
+                state.skips_rejected += 1
+                self._rlog(f'{cam}:bad_skip', f'dropped SkippedImages of camera {cam} on '
+                           f'{state.topic}/skipped: after {after / NS_PER_S:.6f} s is not '
+                           f'before header.stamp {before / NS_PER_S:.6f} s')
+                return
+            state.skips += 1
+            if self.fusion is None:
+                return
+            now = steady_ns()
+            for synced in self.sync.skip(cam, after, before, now):
+                self._process(synced)
+            self._arm_release()
+
     def _poll(self) -> None:
         """Let the sets go whose wait for missing cameras ran out (the release timer)."""
         with self._lock:
@@ -802,6 +830,8 @@ class FusionNode(Node):
                           'used in sets': ss.used, 'dropped by sync': ss.dropped,
                           'late': ss.late, 'outlier stamps': ss.outliers,
                           'missing from sets': ss.missing,
+                          'skip notices (persons_2d/skipped)': st.skips,
+                          'skip notices rejected': st.skips_rejected,
                           'offset mean (ms)': ss.offset_mean_s * 1e3,
                           'offset jitter (ms)': ss.offset_jitter_s * 1e3}
                 for reason, n in sorted(ss.unmatched.items()):
@@ -856,6 +886,8 @@ class FusionNode(Node):
             new = {k: v - self._drops_reported.get(k, 0) for k, v in drops.items()}
             self._drops_reported = drops
             values = {'sets emitted': s.sets_emitted, 'partial sets': s.partial_sets,
+                      'partial sets decided on skip notices':
+                          s.decisions['skipped (announced)'],
                       'pivots dropped (too few views)': s.pivots_dropped,
                       'pending messages': s.pending(), 'held outlier messages': s.held_outliers,
                       'slop (ms)': s.slop_ns / 1e6,

@@ -45,7 +45,7 @@ import threading
 import time
 from typing import Any, Deque, List, Optional, Sequence, Tuple, Union
 
-from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo
+from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError, open_estimator
@@ -58,7 +58,8 @@ from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, le
 from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
 from mv3dpose_ros.ros.images import numpy_to_image
 from mv3dpose_ros.ros.memory import reexec_with_hugepages
-from mv3dpose_ros.ros.messages import numpy_to_person2d_array, skeleton_info_msg, stamp_to_ns
+from mv3dpose_ros.ros.messages import (ns_to_stamp, numpy_to_person2d_array, skeleton_info_msg,
+                                       stamp_to_ns)
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
 from mv3dpose_ros.ros.spin import spin_until_shutdown
@@ -524,12 +525,16 @@ class Pose2DNode(LifecycleNode):
         self.camera_id = ''
         self._sub = None
         self._compressed = False        # image_transport: compressed
-        self._pub = self._info_pub = self._debug_pub = None
+        self._pub = self._info_pub = self._debug_pub = self._skipped_pub = None
+        #: (publication sequence number, stamp) of the last image whose persons were published
+        #: (images not following it are announced on persons_2d/skipped).
+        self._published: Tuple[Optional[int], int] = (None, 0)
         self._diag: Optional[Diagnostics] = None
         self._worker: Optional[threading.Thread] = None
         self._cv = threading.Condition()
         self._pending: Union[Image, bytes, None] = None
         self._pending_ns = 0                 # steady clock when the pending image arrived
+        self._pending_seq: Optional[int] = None  # its publication sequence number (DDS)
         self._fit_pending = False            # model.input_size auto: choose at the first image
         self._ladder: List[Tuple[int, int]] = []  # sizes auto may use, the fitted one first
         self._estimators: dict = {}          # input size -> opened estimator (ladder steps)
@@ -564,6 +569,7 @@ class Pose2DNode(LifecycleNode):
 
     def _reset_stats(self) -> None:
         self.received = self.processed = self.dropped = self.skipped = self.taken = 0
+        self.skips_announced = 0             # SkippedImages published (persons_2d/skipped)
         self.rejected_encoding = self.rejected_stamp = self.failed = 0
         self.people_last = 0
         self._in_freq, self._out_freq = FrequencyStats(), FrequencyStats()
@@ -687,6 +693,8 @@ class Pose2DNode(LifecycleNode):
         self._pub = self.create_publisher(Person2DArray, 'persons_2d', out_qos,
                                           event_callbacks=publisher_events(
                                               self, 'persons_2d', out_qos))
+        self._skipped_pub = self.create_publisher(SkippedImages, 'persons_2d/skipped',
+                                                  reliable_qos(10))
         self._info_pub = self.create_publisher(SkeletonInfo, 'skeleton_info', latched_qos())
         if self._param('debug_image'):
             self._debug_pub = self.create_publisher(Image, '~/debug_image', reliable_qos(1))
@@ -765,10 +773,11 @@ class Pose2DNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _release(self) -> None:
-        for pub in (self._pub, self._info_pub, self._debug_pub, self._rig_pub):
+        for pub in (self._pub, self._info_pub, self._debug_pub, self._rig_pub,
+                    self._skipped_pub):
             if pub is not None:
                 self.destroy_publisher(pub)
-        self._pub = self._info_pub = self._debug_pub = self._rig_pub = None
+        self._pub = self._info_pub = self._debug_pub = self._rig_pub = self._skipped_pub = None
         if self._rig_sub is not None:
             self.destroy_subscription(self._rig_sub)
         if self._rig_timer is not None:
@@ -843,10 +852,10 @@ class Pose2DNode(LifecycleNode):
                 frames = seq - last
         received = info.get('received_timestamp') if isinstance(info, dict) else None
         self._on_image(msg, frames, received if isinstance(received, int) and received > 0
-                       else None)
+                       else None, seq if isinstance(seq, int) and seq > 0 else None)
 
     def _on_image(self, msg: Union[Image, bytes], frames: int = 1,
-                  arrived_ns: Optional[int] = None) -> None:
+                  arrived_ns: Optional[int] = None, seq: Optional[int] = None) -> None:
         """
         Keep only the newest image; count the ones it replaces as dropped.
 
@@ -855,7 +864,8 @@ class Pose2DNode(LifecycleNode):
 
         ``frames``: images the camera published since the last one taken (the ones between
         were never taken: skipped by the grid, or superseded while the model was busy);
-        ``arrived_ns``: when DDS received it (wall clock; default now).
+        ``arrived_ns``: when DDS received it (wall clock; default now); ``seq``: its
+        publication sequence number (None when DDS gives none).
         """
         now = self.get_clock().now().nanoseconds
         arrived = arrived_ns or time.time_ns()
@@ -885,7 +895,7 @@ class Pose2DNode(LifecycleNode):
                 self.dropped += 1
                 if self._auto is not None:
                     self._auto.add_replaced(1, time.monotonic())
-            self._pending, self._pending_ns = msg, arrived
+            self._pending, self._pending_ns, self._pending_seq = msg, arrived, seq
             self._cv.notify()
 
     def _doze_s(self) -> float:
@@ -954,13 +964,13 @@ class Pose2DNode(LifecycleNode):
                 if self._stop:
                     return
                 msg, self._pending = self._pending, None
-                arrived = self._pending_ns
+                arrived, seq = self._pending_ns, self._pending_seq
             if msg is None:
                 self._take_next()
                 continue
             t0 = time.monotonic()
             try:
-                out = self.process(msg, arrived)
+                out = self.process(msg, arrived, seq)
             except Exception as exc:  # noqa: B902 - one bad frame must never stop the node
                 out = None
                 if not self.context.ok():        # Ctrl-C shut the context down: publish failed
@@ -1076,13 +1086,15 @@ class Pose2DNode(LifecycleNode):
             return auto.size
         return self._ladder[0] if self._ladder else None
 
-    def process(self, msg: Union[Image, bytes],
-                arrived_ns: Optional[int] = None) -> Optional[Person2DArray]:
+    def process(self, msg: Union[Image, bytes], arrived_ns: Optional[int] = None,
+                seq: Optional[int] = None) -> Optional[Person2DArray]:
         """
         Run the whole path on one image and publish; return the message (None if rejected).
 
         ``msg`` is an ``Image`` or its serialised CDR bytes (what the raw subscription gets);
-        ``arrived_ns`` the wall-clock time it was received (for the transport/wait stages).
+        ``arrived_ns`` the wall-clock time it was received (for the transport/wait stages),
+        ``seq`` its publication sequence number (images skipped since the last published one
+        are announced on persons_2d/skipped before the model runs).
         """
         t0 = time.perf_counter()
         started_ns = time.time_ns()
@@ -1099,6 +1111,7 @@ class Pose2DNode(LifecycleNode):
                      f'{self.resolve_topic_name("image")} rejected: the driver must stamp images '
                      'with their capture time (fusion synchronises on it)', now)
             return None
+        self._announce_skipped(msg.header, seq)
         try:
             image, order = message_to_numpy(msg, data)
         except ImageError as exc:
@@ -1136,6 +1149,7 @@ class Pose2DNode(LifecycleNode):
         if pub is None:
             return out
         pub.publish(out)
+        self._published = (seq, stamp)
         debug = self._debug_pub
         if debug is not None and debug.get_subscription_count() > 0:
             drawn = draw_people(image if order != 'rgb' else image[..., ::-1], det.keypoints,
@@ -1163,6 +1177,27 @@ class Pose2DNode(LifecycleNode):
             self._capture_ms.add(capture_ms)
         return out
 
+    def _announce_skipped(self, header: Any, seq: Optional[int]) -> None:
+        """
+        Tell the fusion node that no persons will come for the images before this one.
+
+        Only when this image does not follow the last one published (by the camera's
+        publication sequence numbers): the ones between were replaced while the model was
+        busy, skipped by the grid, rejected or failed. The fusion node then stops waiting
+        for them. Needs the sequence numbers (a raw subscription's message info).
+        """
+        last_seq, last_stamp = self._published
+        stamp = stamp_to_ns(header.stamp)
+        pub = self._skipped_pub
+        if pub is None or seq is None or (last_seq is not None and seq == last_seq + 1) or \
+                stamp <= last_stamp:
+            return
+        note = SkippedImages(header=header, camera_id=self.camera_id,
+                             after=ns_to_stamp(last_stamp))
+        pub.publish(note)
+        with self._stats_lock:
+            self.skips_announced += 1
+
     # -- diagnostics ----------------------------------------------------------------------------
     def _diagnose(self) -> list:
         now = self.get_clock().now().nanoseconds
@@ -1184,6 +1219,7 @@ class Pose2DNode(LifecycleNode):
                   'Images processed': self.processed,
                   'Dropped before inference (newer image arrived)': self.dropped,
                   'Skipped (inference_rate_hz grid)': self.skipped,
+                  'Skips announced (persons_2d/skipped)': self.skips_announced,
                   'Inference rate mode': ('auto' if self._auto is not None else
                                           'fixed' if self._rate_hz else 'every image'),
                   'Inference rate (Hz)': self._rate_label(),
