@@ -269,7 +269,7 @@ def drop_table(probe: Probe, published: Dict[str, str]) -> List[str]:
                   if any(w in k.lower() for w in ('dropped', 'rejected', 'skipped'))]
         parts += [f'fusion {k} {v}' for k, v in fus.items()
                   if any(w in k for w in ('dropped', 'late', 'rejected', 'outlier', 'lost',
-                                          'missing')) and v not in ('0', '0.0')]
+                                          'missing', 'skipped')) and v not in ('0', '0.0')]
         lines.append(f'  {cam}: ' + ', '.join(parts))
     return lines
 

@@ -638,35 +638,37 @@ def test_set_short_of_a_camera_goes_at_once_when_the_camera_announces_the_skip(
     notes = h.probe.create_publisher(SkippedImages, '/cam_04/persons_2d/skipped',
                                      reliable_qos(10))
     assert h.spin_until(lambda: notes.get_subscription_count() > 0)
-    t0 = base_ns(14)
-    stamp = [t0 + int(round(f * NS / FPS)) for f in range(14)]
-    for cam, msg, _ in stream(scene, t0, range(10)):
+    t0 = base_ns(24)
+    stamp = [t0 + int(round(f * NS / FPS)) for f in range(24)]
+    for cam, msg, _ in stream(scene, t0, range(20)):
         h.publish(cam, msg)
-    assert h.wait_sets(10)
-    for cam, msg, _ in stream(scene, t0, [10], skip=lambda c, f: c == 'cam_04'):
+    assert h.wait_sets(20)
+    for cam, msg, _ in stream(scene, t0, [20], skip=lambda c, f: c == 'cam_04'):
         h.publish(cam, msg)
     h.spin_for(0.3)
-    assert h.node.counts['sets'] == 10        # waiting up to 5 s for cam_04's frame 10
-    # cam_04 replaced frame 10 with frame 11 before inference and says so (its frame 9 was
+    assert h.node.counts['sets'] == 20        # waiting up to 5 s for cam_04's frame 20
+    # cam_04 replaced frame 20 with frame 21 before inference and says so (its frame 19 was
     # the last it published). A malformed notice first: dropped, counted, nothing decided.
-    notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[9])),
-                                camera_id='cam_04', after=ns_to_stamp(stamp[11])))
+    notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[19])),
+                                camera_id='cam_04', after=ns_to_stamp(stamp[21])))
     h.spin_for(0.2)
-    assert h.node.counts['sets'] == 10 and h.node.cams['cam_04'].skips_rejected == 1
+    assert h.node.counts['sets'] == 20 and h.node.cams['cam_04'].skips_rejected == 1
     t_note = time.monotonic()
-    notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[11])),
-                                camera_id='cam_04', after=ns_to_stamp(stamp[9])))
-    assert h.wait_sets(11, timeout=2.5), 'the set still waited for the skipped image'
+    notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[21])),
+                                camera_id='cam_04', after=ns_to_stamp(stamp[19])))
+    assert h.wait_sets(21, timeout=2.5), 'the set still waited for the skipped image'
     assert time.monotonic() - t_note < 2.5
-    assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[10]
+    assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[20]
     assert h.node.sync.stats['cam_04'].missing == 1 and h.node.cams['cam_04'].skips == 1
     assert h.node.sync.decisions['skipped (announced)'] == 1
-    # Frame 11 then completes its set as usual; a skip never covers its own end stamps.
-    for cam, msg, _ in stream(scene, t0, [11]):
+    # Frame 21 then completes its set as usual; a skip never covers its own end stamps.
+    for cam, msg, _ in stream(scene, t0, [21]):
         h.publish(cam, msg)
-    assert h.wait_sets(12)
-    assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[11]
+    assert h.wait_sets(22)
+    assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[21]
     assert h.node.counts['partial_sets'] == 1
+    # Frame 20 is counted as skipped by the camera, not as lost upstream.
+    assert (h.node.sync.stats['cam_04'].skipped, h.node.sync.stats['cam_04'].lost) == (1, 0)
 
 
 def test_tracks_deleted_when_every_input_stops(harness_factory, scene):

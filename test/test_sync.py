@@ -278,6 +278,21 @@ def test_stamp_gaps_count_upstream_losses():
     assert sync.stats['cam0'].usual_rate_hz == pytest.approx(1e9 / PERIOD, rel=0.01)
 
 
+def test_announced_gaps_count_as_skipped_not_lost():
+    """Frames a camera said it skips are its own choice, not a loss upstream."""
+    sync = make()
+    out = []
+    for f, fr in enumerate(frames(100)):
+        for cam, stamp in fr:
+            if cam == 'cam0' and f in (40, 41, 42, 70):
+                continue
+            if cam == 'cam0' and f == 43:        # announced before frame 43's result
+                out += sync.skip('cam0', T0 + 39 * PERIOD, stamp, stamp - T0 + LATENCY)
+            out += feed(sync, [(cam, stamp)])
+    assert sync.stats['cam0'].skipped == 3 and sync.stats['cam0'].lost == 1   # frame 70
+    assert len(out) == 100 and sum(s.complete for s in out) == 96
+
+
 def test_too_few_views_pivot_dropped_and_counted():
     sync = make(min_views=2)
     later = [(c, T0 + f * PERIOD) for f in range(1, 6) for c in ('cam1', 'cam2')]

@@ -57,7 +57,8 @@ cameras whose inference finishes at different times lose no set:
   restart) the synchroniser is reset and the caller told so it can reset its tracker too;
   forwards (a pause, or input queues that dropped under load) time simply goes on.
 * Losses upstream are counted from the stamps: a step longer than 1.5 of the camera's usual
-  period counts the frames in between as ``lost``.
+  period counts the frames in between as ``lost`` (as ``skipped`` when the camera announced
+  that gap).
 * Memory is bounded: at most ``max_queue`` messages per camera (beyond it the oldest pivot is
   decided at once, counted as ``overflow``) and fixed windows for the statistics.
 """
@@ -174,6 +175,7 @@ class CameraSyncStats:
     outliers: int = 0                # ... isolated outlier stamps
     missing: int = 0                 # emitted sets without this camera
     lost: int = 0                    # frames missing from the stamp sequence (upstream loss)
+    skipped: int = 0                 # ... of them announced as skipped by the camera (``skip``)
     latest_stamp_ns: Optional[int] = None
     last_seen_ns: Optional[int] = None       # newest stamp seen (accepted or not): rate, gaps
     last_arrival_ns: Optional[int] = None
@@ -209,14 +211,23 @@ class CameraSyncStats:
         """Highest sustained frame rate seen from the stamps (NaN until known)."""
         return NS_PER_S / self.usual_period_ns if self.usual_period_ns else math.nan
 
-    def observe_step(self, stamp_ns: int) -> None:
-        """Update period, usual period and upstream losses with a stamp newer than the last."""
+    def observe_step(self, stamp_ns: int, gaps: Iterable[Tuple[int, int]] = ()) -> None:
+        """
+        Update period, usual period and upstream losses with a stamp newer than the last.
+
+        Frames missing inside one of the announced ``gaps`` (after, before) are counted as
+        skipped, not lost.
+        """
         last, self.last_seen_ns = self.last_seen_ns, max(stamp_ns, self.last_seen_ns or 0)
         if last is None or stamp_ns <= last:
             return
         step = stamp_ns - last
         if self.usual_period_ns and step > 1.5 * self.usual_period_ns:
-            self.lost += int(round(step / self.usual_period_ns)) - 1
+            missed = int(round(step / self.usual_period_ns)) - 1
+            if any(after <= last and stamp_ns <= before for after, before in gaps):
+                self.skipped += missed
+            else:
+                self.lost += missed
         self.steps_ns.append(step)
         if len(self.steps_ns) >= PERIOD_MIN_STEPS:
             self.period_ns = int(statistics.median(self.steps_ns))
@@ -319,7 +330,7 @@ class StreamSynchronizer:
 
     def observe(self, camera_id: str, stamp_ns: int) -> None:
         """Count a stamp the caller dropped before ``add`` (rate and gap statistics only)."""
-        self.stats[camera_id].observe_step(int(stamp_ns))
+        self.stats[camera_id].observe_step(int(stamp_ns), self._gaps[camera_id])
 
     def skip(self, camera_id: str, after_ns: int, before_ns: int,
              now_ns: Optional[int] = None) -> List[SyncedSet]:
@@ -505,7 +516,7 @@ class StreamSynchronizer:
         stamp_ns = entry[0]
         stats = self.stats[cam]
         self._last_accepted_arrival[cam] = entry[2]
-        stats.observe_step(stamp_ns)
+        stats.observe_step(stamp_ns, self._gaps[cam])
         if stats.latest_stamp_ns is None or stamp_ns > stats.latest_stamp_ns:
             stats.latest_stamp_ns = stamp_ns
         self._update_slop()
@@ -695,6 +706,7 @@ def summarize(stats: Dict[str, CameraSyncStats], cameras: Iterable[str]) -> Dict
     return {c: {'received': stats[c].received, 'used': stats[c].used,
                 'dropped': stats[c].dropped, 'late': stats[c].late,
                 'outliers': stats[c].outliers, 'lost upstream': stats[c].lost,
+                'skipped (announced)': stats[c].skipped,
                 'missing': stats[c].missing, 'rate_hz': stats[c].rate_hz,
                 'usual_rate_hz': stats[c].usual_rate_hz,
                 'offset_mean_s': stats[c].offset_mean_s,

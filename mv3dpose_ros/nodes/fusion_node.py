@@ -826,6 +826,7 @@ class FusionNode(Node):
                           'rate from stamps (Hz)': ss.rate_hz,
                           'expected rate (Hz)': expected,
                           'lost upstream (stamp gaps)': ss.lost,
+                          'skipped by pose2d (announced gaps)': ss.skipped,
                           'received': st.received, 'accepted': st.accepted,
                           'used in sets': ss.used, 'dropped by sync': ss.dropped,
                           'late': ss.late, 'outlier stamps': ss.outliers,
