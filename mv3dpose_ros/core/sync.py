@@ -574,7 +574,8 @@ class StreamSynchronizer:
         """
         Return None while a camera missing from the pivot's set can still send for it.
 
-        Else why none can: 'skipped' when a camera's announced gap holds the window.
+        Else why none can: 'skipped (announced)' when a camera's announced gap holds the
+        window, else 'no camera can still come'.
         """
         hi = pivot + self.slop_ns
         reason = 'no camera can still come'
