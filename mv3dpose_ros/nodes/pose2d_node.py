@@ -233,9 +233,9 @@ class AutoInferenceRate:
       infer;
     - back up one step (a faster rate, every image, then a larger size, whose time is
       estimated from the pixel ratio) only when that stays below ``AUTO_UP`` (every image
-      below ``AUTO_UP_EVERY``, a larger size below ``AUTO_UP_SIZE``); down as soon as the current step needs more than
-      ``AUTO_DOWN`` of the frame period (one grid rate slower while it needs at most
-      ``AUTO_GENTLE``, else at ``AUTO_MARGIN`` at once).
+      below ``AUTO_UP_EVERY``, a larger size below ``AUTO_UP_SIZE``); down as soon as the
+      current step needs more than ``AUTO_DOWN`` of the frame period (one grid rate slower
+      while it needs at most ``AUTO_GENTLE``, else at ``AUTO_MARGIN`` at once).
 
     A choice is kept for ``AUTO_DWELL_S`` and ``AUTO_MIN_SAMPLES`` images at least, and for
     ``AUTO_UP_DWELL_S`` before a step up, so it follows the load but does not flap.
