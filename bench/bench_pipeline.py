@@ -259,8 +259,8 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     dropped_pose = sum(int(d.get('Dropped before inference (newer image arrived)', 0))
                        for d in pose)
     dropped_sync = sum(int(d.get('dropped by sync', 0)) for d in diags.values())
-    sets = [v for v in diags.values() if 'sets emitted' in v]
-    sets = {k: int(float(sets[0].get(k, 0))) if sets else 0 for k in (
+    pipeline = [v for v in diags.values() if 'sets emitted' in v]
+    sets = {k: int(float(pipeline[0].get(k, 0))) if pipeline else 0 for k in (
         'sets emitted', 'partial sets', 'partial sets decided on skip notices')}
     per_point = {}
     for point, seen in observed:

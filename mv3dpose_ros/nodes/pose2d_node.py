@@ -853,14 +853,15 @@ class Pose2DNode(LifecycleNode):
     def _on_taken(self, msg: bytes, info: Any) -> None:
         """Take one image from the intake; count the camera's images never taken before it."""
         seq = info.get('publication_sequence_number') if isinstance(info, dict) else None
+        seq = seq if isinstance(seq, int) and seq > 0 else None
         frames = 1
-        if isinstance(seq, int) and seq > 0:
+        if seq is not None:
             last, self._last_seq = self._last_seq, seq
             if last is not None and 0 < seq - last < 100_000:     # else a new publisher
                 frames = seq - last
         received = info.get('received_timestamp') if isinstance(info, dict) else None
         self._on_image(msg, frames, received if isinstance(received, int) and received > 0
-                       else None, seq if isinstance(seq, int) and seq > 0 else None)
+                       else None, seq)
 
     def _on_image(self, msg: Union[Image, bytes], frames: int = 1,
                   arrived_ns: Optional[int] = None, seq: Optional[int] = None) -> None:
@@ -1119,7 +1120,7 @@ class Pose2DNode(LifecycleNode):
                      f'{self.resolve_topic_name("image")} rejected: the driver must stamp images '
                      'with their capture time (fusion synchronises on it)', now)
             return None
-        self._announce_skipped(msg.header, seq)
+        self._announce_skipped(msg.header, stamp, seq)
         try:
             image, order = message_to_numpy(msg, data)
         except ImageError as exc:
@@ -1185,7 +1186,7 @@ class Pose2DNode(LifecycleNode):
             self._capture_ms.add(capture_ms)
         return out
 
-    def _announce_skipped(self, header: Any, seq: Optional[int]) -> None:
+    def _announce_skipped(self, header: Any, stamp: int, seq: Optional[int]) -> None:
         """
         Tell the fusion node that no persons will come for the images before this one.
 
@@ -1195,7 +1196,6 @@ class Pose2DNode(LifecycleNode):
         for them. Needs the sequence numbers (a raw subscription's message info).
         """
         last_seq, last_stamp = self._published
-        stamp = stamp_to_ns(header.stamp)
         pub = self._skipped_pub
         if pub is None or seq is None or (last_seq is not None and seq == last_seq + 1) or \
                 stamp <= last_stamp:
