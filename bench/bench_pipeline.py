@@ -28,8 +28,9 @@ count and execution provider:
   the previous inference), decode, pre, inference, post, publish, fusion (``Fusion.step``);
 - drops by stage: lost before pose2d (published - received: DDS / QoS), pose2d newest-only
   (replaced before inference), fusion synchroniser (dropped by sync);
-- the sets fusion_node emitted, how many were partial and how many of those went on a
-  camera's skip notice (``persons_2d/skipped``) instead of waiting out ``sync.max_wait_s``;
+- the sets fusion_node emitted, how many were partial, and how many incomplete sets were
+  decided on a camera's skip notice (``persons_2d/skipped``) instead of waiting out
+  ``sync.max_wait_s`` (emitted partial, or dropped with too few views);
 - people found: skeletons observed in each tracks message (``last_observed`` = the set's
   stamp), per time point: the share of sets with all 3 Panoptic people, and the minimum.
 
@@ -261,7 +262,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     dropped_sync = sum(int(d.get('dropped by sync', 0)) for d in diags.values())
     pipeline = [v for v in diags.values() if 'sets emitted' in v]
     sets = {k: int(float(pipeline[0].get(k, 0))) if pipeline else 0 for k in (
-        'sets emitted', 'partial sets', 'partial sets decided on skip notices')}
+        'sets emitted', 'partial sets', 'incomplete sets decided on skip notices')}
     per_point = {}
     for point, seen in observed:
         per_point.setdefault(point, []).append(seen)
@@ -304,8 +305,9 @@ def _print(r: dict) -> None:
     if r['cameras'] > 1:
         s = r['sets']
         print(f'  sets (whole run): {s["sets emitted"]} emitted, {s["partial sets"]} partial, '
-              f'{s["partial sets decided on skip notices"]} of them on a skip notice '
-              '(persons_2d/skipped)', flush=True)
+              f'{s["incomplete sets decided on skip notices"]} incomplete sets decided on a '
+              'skip notice (persons_2d/skipped: emitted partial, or dropped with too few '
+              'views)', flush=True)
     print(f'  people: {"sets" if r["cameras"] > 1 else "images"} with all 3 observed '
           f'{full}/{sets}; per time point {people}', flush=True)
 

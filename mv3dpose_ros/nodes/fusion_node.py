@@ -887,7 +887,7 @@ class FusionNode(Node):
             new = {k: v - self._drops_reported.get(k, 0) for k, v in drops.items()}
             self._drops_reported = drops
             values = {'sets emitted': s.sets_emitted, 'partial sets': s.partial_sets,
-                      'partial sets decided on skip notices':
+                      'incomplete sets decided on skip notices':
                           s.decisions['skipped (announced)'],
                       'pivots dropped (too few views)': s.pivots_dropped,
                       'pending messages': s.pending(), 'held outlier messages': s.held_outliers,
