@@ -31,7 +31,10 @@ people the fusion core triangulates from the 5 views at each time point (the sce
 from the first 4 (the rig the pipeline benches play), plus the median keypoint shift (2D, and
 of the triangulated joints in 3D) against the first variant:
 
-    python bench/bench_pose2d.py --compare [--threads 1]
+    python bench/bench_pose2d.py --compare [--threads 1] [--providers cpu cuda]
+
+With several ``--providers`` each variant runs on each, and the keypoint shift is taken against
+the same variant on the first provider (``cpu cuda``: does the GPU find what the CPU finds?).
 """
 
 import argparse
@@ -40,6 +43,7 @@ import resource
 import statistics
 import sys
 import time
+from typing import Sequence
 
 import cv2
 
@@ -56,9 +60,11 @@ def main() -> int:
     parser.add_argument('--iters', type=int, default=30)
     parser.add_argument('--compare', action='store_true',
                         help='speed and people found of every fetched variant (see above)')
+    parser.add_argument('--providers', nargs='+', default=['auto'],
+                        help='--compare: execution providers (auto, cuda, cpu, ...), each run')
     args = parser.parse_args()
     if args.compare:
-        return compare(args.model, args.threads)
+        return compare(args.model, args.threads, args.providers)
 
     from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
     try:
@@ -168,8 +174,8 @@ def _shift_3d_mm(ref, other) -> list:
     return out
 
 
-def compare(model: str, threads: int) -> int:
-    """Print speed and people found of each fetched variant of ``model``."""
+def compare(model: str, threads: int, providers: Sequence[str] = ('auto',)) -> int:
+    """Print speed and people found of each fetched variant of ``model`` on each provider."""
     import numpy as np
     from mv3dpose_ros.core.calibration import load_calibration
     from mv3dpose_ros.core.fusion import Fusion
@@ -185,8 +191,8 @@ def compare(model: str, threads: int) -> int:
     extra = sorted({tuple(meta['input_size']) for _, meta in list_fetched()
                     if meta.get('name') == model and meta.get('input_size')}
                    - set(spec.sizes), key=lambda s: -s[0] * s[1])
-    variants = [(s, p) for p in PRECISIONS for s in list(spec.sizes) + extra
-                if os.path.isfile(model_file(model, s, None, p))]
+    variants = [(s, p, e) for p in PRECISIONS for s in list(spec.sizes) + extra
+                for e in providers if os.path.isfile(model_file(model, s, None, p))]
     if not variants or not os.path.isdir(demo):
         print(f'bench_pose2d --compare: skipped: no fetched {model} or no {demo}')
         return 0
@@ -195,8 +201,12 @@ def compare(model: str, threads: int) -> int:
     calib4 = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cams[:4])
     images = {(c, f): cv2.imread(os.path.join(demo, c, f'{c}_{f}.jpg')) for c in cams
               for f in frames}
-    ests = [open_estimator(model_file(model, s, None, p), threads=threads)
-            for s, p in variants]
+    ests = [open_estimator(model_file(model, s, None, p), threads=threads, providers=e)
+            for s, p, e in variants]
+    # The reference of each variant: variant 0, or with several providers the same model on
+    # the first provider.
+    ref = [0 if len(providers) == 1 else variants.index((s, p, providers[0]))
+           for s, p, _ in variants]
     wall = [[] for _ in ests]
     cpu = [[] for _ in ests]
     dets = [{} for _ in ests]
@@ -214,7 +224,10 @@ def compare(model: str, threads: int) -> int:
                     dets[i][key] = est.infer(image).keypoints
     print(f'bench_pose2d --compare: {model} on {len(images)} real 1920x1080 Panoptic views, '
           f'{threads} intra-op thread(s), load {os.getloadavg()}')
-    for i, (size, precision) in enumerate(variants):
+    for est in ests:
+        for warning in est.warnings:
+            print(f'  ({os.path.basename(est.path)}) {warning}')
+    for i, (size, precision, _) in enumerate(variants):
         people, people4 = [], []
         for f in frames:
             fusion = Fusion(calib, 'coco17')
@@ -224,13 +237,17 @@ def compare(model: str, threads: int) -> int:
             fusion = Fusion(calib4, 'coco17')
             fusion.step({c: dets[i][c, f] for c in cams[:4]}, 0.0)
             people4.append(int(fusion.last_poses.shape[0]))
-        shift3d = [d for f in frames for d in _shift_3d_mm(poses3d[0][f], poses3d[i][f])]
-        shift = [d for key in images for d in _shift_px(dets[0][key], dets[i][key])]
-        print(f'  {size_tag(size):>8} {precision}: run median {statistics.median(wall[i]):6.1f} '
+        r = ref[i]
+        shift3d = [d for f in frames for d in _shift_3d_mm(poses3d[r][f], poses3d[i][f])]
+        shift = [d for key in images for d in _shift_px(dets[r][key], dets[i][key])]
+        where = ests[i].provider.replace('ExecutionProvider', '')
+        print(f'  {size_tag(size):>8} {precision} {where}: run median '
+              f'{statistics.median(wall[i]):6.1f} '
               f'ms wall, {statistics.median(cpu[i]):6.1f} ms CPU; 3D people per time point '
               f'{people} (scene: 3), with 4 cameras {people4}; keypoint shift vs '
-              f'{size_tag(variants[0][0])} {variants[0][1]}: median '
-              f'{np.median(shift) if shift else float("nan"):.1f} px, '
+              f'{size_tag(variants[r][0])} {variants[r][1]} '
+              f'{ests[r].provider.replace("ExecutionProvider", "")}: median '
+              f'{np.median(shift) if shift else float("nan"):.2f} px, '
               f'3D {np.median(shift3d) if shift3d else float("nan"):.0f} mm')
     return 0
 

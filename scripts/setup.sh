@@ -40,13 +40,15 @@ if [ "$(cat "$STAMPS/requirements" 2>/dev/null)" != "$req_hash" ]; then
 fi
 
 # 2b. ONNXRUNTIME=gpu make setup: onnxruntime-gpu (CUDA and TensorRT execution providers) in
-#     place of the CPU build, same version; CUDA / cuDNN / TensorRT come from the system (README
-#     "Choosing a model and a provider"). The default stays CPU-only.
+#     place of the CPU build, same version, with CUDA 13 and cuDNN 9 as wheels (its cuda and
+#     cudnn extras, about 1.5 GB; the estimator preloads them); the NVIDIA driver (>= 580) and
+#     TensorRT 10, if wanted, come from the system (README "Choosing a model and a provider").
+#     The default stays CPU-only.
 ort_flavour=${ONNXRUNTIME:-cpu}
 case "$ort_flavour" in cpu|gpu) ;; *) fail 'ONNXRUNTIME' "must be cpu or gpu, got '$ort_flavour'" ;; esac
 ort_pin=$(grep '^onnxruntime==' requirements.txt)
 ort_want=$ort_pin
-[ "$ort_flavour" = gpu ] && ort_want="onnxruntime-gpu==${ort_pin#onnxruntime==}"
+[ "$ort_flavour" = gpu ] && ort_want="onnxruntime-gpu[cuda,cudnn]==${ort_pin#onnxruntime==}"
 if [ "$ort_flavour" = gpu ] || [ -f "$STAMPS/onnxruntime" ]; then
   if [ "$(cat "$STAMPS/onnxruntime" 2>/dev/null)" != "$ort_want" ]; then
     step "installing $ort_want (ONNXRUNTIME=$ort_flavour)"

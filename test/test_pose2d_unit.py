@@ -326,12 +326,20 @@ def test_model_checksum_is_computed_once_per_file_and_mtime(tmp_path, yolo_case,
 
 
 def test_provider_auto_order_and_unknown_names():
-    from mv3dpose_ros.pose2d.estimator import resolve_providers
+    from mv3dpose_ros.pose2d.estimator import resolve_providers, tensorrt_found
     every = ['CPUExecutionProvider', 'OpenVINOExecutionProvider', 'CUDAExecutionProvider',
              'TensorrtExecutionProvider']
-    assert resolve_providers('auto', every)[0] == [
+    assert resolve_providers('auto', every, tensorrt=True)[0] == [
         'TensorrtExecutionProvider', 'CUDAExecutionProvider', 'OpenVINOExecutionProvider',
         'CPUExecutionProvider']
+    # onnxruntime-gpu offers TensorRT whether or not TensorRT is installed: auto skips it
+    # when its libraries do not load; asked for by name it stays.
+    assert resolve_providers('auto', every, tensorrt=False)[0] == [
+        'CUDAExecutionProvider', 'OpenVINOExecutionProvider', 'CPUExecutionProvider']
+    assert ('TensorrtExecutionProvider' in resolve_providers('auto', every)[0]) == (
+        tensorrt_found())
+    assert resolve_providers('tensorrt', every)[0] == ['TensorrtExecutionProvider',
+                                                       'CPUExecutionProvider']
     assert resolve_providers('auto', ['CPUExecutionProvider', 'CUDAExecutionProvider']) == (
         ['CUDAExecutionProvider', 'CPUExecutionProvider'], [])
     assert resolve_providers('cpu, cuda', every)[0] == ['CUDAExecutionProvider',
@@ -340,6 +348,32 @@ def test_provider_auto_order_and_unknown_names():
     assert chosen == ['CPUExecutionProvider'] and 'TensorrtExecutionProvider' in warnings[0]
     with pytest.raises(ValueError, match="unknown execution provider 'cudaa'"):
         resolve_providers('cudaa', every)
+
+
+def test_cuda_libraries_are_preloaded_once_and_failures_reported(monkeypatch, yolo_case):
+    """onnxruntime-gpu finds the CUDA wheels only through preload_dlls (faked here)."""
+    import onnxruntime as ort
+    from mv3dpose_ros.pose2d import estimator as est_mod
+    calls = []
+
+    def preload_dlls(cuda=True, cudnn=True, msvc=True, directory=None):
+        calls.append((cuda, cudnn, msvc))
+        print('Failed to load libcublasLt.so.13: cannot open shared object file')
+        print('Please follow https://onnxruntime.ai/docs/install/ to install CUDA.')
+
+    monkeypatch.setattr(ort, 'preload_dlls', preload_dlls, raising=False)
+    monkeypatch.setattr(est_mod, '_cuda_preloaded', None)
+    first = est_mod.preload_cuda()
+    assert first == ['Failed to load libcublasLt.so.13: cannot open shared object file']
+    assert est_mod.preload_cuda() == first and calls == [(True, True, False)]   # once
+    # A model asked on CUDA (offered, as by onnxruntime-gpu) preloads first and reports it.
+    monkeypatch.setattr(est_mod, '_cuda_preloaded', None)
+    monkeypatch.setattr(est_mod, 'available_providers',
+                        lambda: ['CUDAExecutionProvider', 'CPUExecutionProvider'])
+    est = open_estimator(yolo_case[0], providers='auto')
+    assert len(calls) == 2 and first[0] in est.warnings
+    assert est.provider == 'CPUExecutionProvider'        # this CPU build cannot start CUDA
+    assert open_estimator(yolo_case[0], providers='cpu').warnings == [] and len(calls) == 2
 
 
 def test_cuda_requested_on_a_cpu_only_machine_falls_back_to_cpu(yolo_case):

@@ -26,7 +26,9 @@ supported. ``PoseEstimator.infer(image)`` returns ``Detections`` in original-ima
   output ``[1, 6, 56]`` = 17 x (y, x, score) normalised, box, instance score; no NMS.
 """
 
+import contextlib
 from dataclasses import dataclass, field
+import io
 import os
 import time
 from typing import Dict, List, Optional, Sequence, Tuple, Union
@@ -60,8 +62,24 @@ def available_providers() -> List[str]:
     return list(ort.get_available_providers())
 
 
+#: The TensorRT libraries onnxruntime-gpu's TensorRT provider links (TensorRT 10).
+TENSORRT_LIBRARIES = ('libnvinfer.so.10', 'libnvonnxparser.so.10')
+
+
+def tensorrt_found() -> bool:
+    """Tell whether TensorRT's libraries load, i.e. the TensorRT provider can start."""
+    import ctypes
+    try:
+        for name in TENSORRT_LIBRARIES:
+            ctypes.CDLL(name)
+    except OSError:
+        return False
+    return True
+
+
 def resolve_providers(request: Union[str, Sequence[str]] = 'auto',
-                      available: Optional[Sequence[str]] = None) -> Tuple[List[str], List[str]]:
+                      available: Optional[Sequence[str]] = None,
+                      tensorrt: Optional[bool] = None) -> Tuple[List[str], List[str]]:
     """
     Turn a provider request into the list onnxruntime gets, CPU always last.
 
@@ -69,13 +87,20 @@ def resolve_providers(request: Union[str, Sequence[str]] = 'auto',
     a comma-separated text / sequence of short names (tensorrt, cuda, openvino, cpu) or full
     onnxruntime names. Returns ``(providers, warnings)``: a requested provider this build
     does not offer is left out with a warning. Raises ``ValueError`` for an unknown name.
+    onnxruntime-gpu always offers TensorRT, so 'auto' keeps it only where TensorRT itself is
+    installed (``tensorrt``: None probes ``TENSORRT_LIBRARIES``); else onnxruntime would
+    fail it, print an error block per model and retry on CUDA.
     """
     available = list(available_providers() if available is None else available)
     items = ([p.strip() for p in request.split(',')] if isinstance(request, str)
              else [str(p).strip() for p in request])
     items = [p for p in items if p]
     if not items or items == ['auto']:
-        return [p for p in PROVIDERS.values() if p in available and p != CPU] + [CPU], []
+        chosen = [p for p in PROVIDERS.values() if p in available and p != CPU]
+        if PROVIDERS['tensorrt'] in chosen and not (tensorrt_found() if tensorrt is None
+                                                    else tensorrt):
+            chosen.remove(PROVIDERS['tensorrt'])
+        return chosen + [CPU], []
     full = {v.lower(): v for v in PROVIDERS.values()}
     chosen, warnings = [], []
     for item in items:
@@ -92,6 +117,34 @@ def resolve_providers(request: Union[str, Sequence[str]] = 'auto',
     if CPU in chosen:
         chosen.remove(CPU)
     return chosen + [CPU], warnings
+
+
+_cuda_preloaded: Optional[List[str]] = None
+
+
+def preload_cuda() -> List[str]:
+    """
+    Load CUDA and cuDNN for onnxruntime-gpu once, from the nvidia-* wheels beside it if present.
+
+    ``ONNXRUNTIME=gpu make setup`` installs CUDA and cuDNN as wheels (``onnxruntime-gpu[cuda,
+    cudnn]``); onnxruntime's CUDA provider finds them only through ``preload_dlls``, else it
+    looks on the loader's path alone (a system CUDA, which still works) and the model would
+    fall back to the CPU. Returns onnxruntime's lines about libraries it could not load.
+    """
+    global _cuda_preloaded
+    if _cuda_preloaded is None:
+        import onnxruntime as ort
+        printed = io.StringIO()
+        preload = getattr(ort, 'preload_dlls', None)
+        if preload is not None:
+            try:
+                with contextlib.redirect_stdout(printed):
+                    preload(cuda=True, cudnn=True, msvc=False)
+            except Exception as exc:  # noqa: B902 - the provider's own error comes next
+                printed.write(f'onnxruntime.preload_dlls failed: {exc}\n')
+        _cuda_preloaded = [line.strip() for line in printed.getvalue().splitlines()
+                           if line.strip().startswith(('Failed', 'onnxruntime.preload'))]
+    return list(_cuda_preloaded)
 
 
 def _provider_options(name: str, model_path: str) -> Dict[str, str]:
@@ -410,6 +463,8 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
         wanted, warnings = resolve_providers(providers)
     except ValueError as exc:
         raise ModelError(str(exc)) from None
+    if {PROVIDERS['cuda'], PROVIDERS['tensorrt']} & set(wanted):
+        warnings += preload_cuda()
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = max(0, int(threads))
     opts.inter_op_num_threads = 1
