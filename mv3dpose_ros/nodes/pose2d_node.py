@@ -471,9 +471,10 @@ PARAMETERS = {
     'model.precision': ('fp32', 'fp32 | int8: variant of the registered model (int8 is built by '
                                 '`mv3dpose model fetch --int8`; see README for its accuracy)',
                         False),
-    'model.providers': ('auto', 'onnxruntime execution providers: auto (TensorRT, CUDA, '
-                                'OpenVINO, CPU: the first available) or a comma-separated list '
-                                'of tensorrt, cuda, openvino, cpu; CPU is the fallback', False),
+    'model.providers': ('auto', 'onnxruntime execution providers: auto (TensorRT where its '
+                                'libraries load, CUDA, OpenVINO, CPU: the first available) or a '
+                                'comma-separated list of tensorrt, cuda, openvino, cpu; CPU is '
+                                'the fallback', False),
     'score_threshold': (-1.0, '[DYNAMIC] minimum person score; < 0 = family default '
                               '(YOLO 0.25, MoveNet 0.2)', True),
     'keypoint_threshold': (0.0, '[DYNAMIC] keypoint confidences below this are published as 0',
