@@ -489,6 +489,36 @@ def test_lifecycle_without_autostart(ros_context, tmp_path):
         bad.destroy_node()
 
 
+def test_a_gpu_model_is_warmed_up_before_the_first_image(ros_context, tmp_path, monkeypatch):
+    """A provider other than the CPU runs once on a blank input when opened (faked here)."""
+    from mv3dpose_ros.nodes import pose2d_node
+    from mv3dpose_ros.pose2d.estimator import PoseEstimator
+    real_open, real_run, runs = pose2d_node.open_estimator, PoseEstimator.run, []
+
+    def run(self, tensor):
+        runs.append((self.provider, tensor.shape))
+        return real_run(self, tensor)
+
+    monkeypatch.setattr(PoseEstimator, 'run', run)
+    model, _ = _crafted_model(tmp_path)
+    for provider, warmed in (('CUDAExecutionProvider', 1), ('CPUExecutionProvider', 0)):
+        def open_on(*args, **kwargs):
+            est = real_open(*args, **kwargs)
+            est.provider = provider                   # as onnxruntime-gpu would report it
+            return est
+
+        runs.clear()
+        monkeypatch.setattr(pose2d_node, 'open_estimator', open_on)
+        node = pose2d_node.Pose2DNode(context=ros_context, parameter_overrides=[
+            Parameter('model.path', value=model)])
+        try:
+            assert node.active and len(runs) == warmed       # before any image came
+            if warmed:
+                assert runs[0] == (provider, (1, 3, *node.estimator.input_size))
+        finally:
+            node.destroy_node()
+
+
 def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
     """inference_rate_hz: only the first image of each stamp window reaches the model."""
     from mv3dpose_ros.nodes.pose2d_node import header_stamp_ns, Pose2DNode

@@ -48,7 +48,7 @@ from typing import Any, Deque, List, Optional, Sequence, Tuple, Union
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.pose2d.draw import draw_people
-from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError, open_estimator
+from mv3dpose_ros.pose2d.estimator import CPU, DEFAULT_SCORE, ModelError, open_estimator
 from mv3dpose_ros.pose2d.estimator import PoseEstimator
 from mv3dpose_ros.pose2d.models import (fit_size, get_spec, list_fetched, model_file,
                                         ModelNotFound, parse_size, resolve_model_path, size_tag)
@@ -633,10 +633,13 @@ class Pose2DNode(LifecycleNode):
         for text in est.warnings:
             self.get_logger().warning(f'camera {self.camera_id}: {text}')
         options = ', '.join(f'{k}={v}' for k, v in sorted(est.provider_options.items()))
+        # A GPU provider's first run sets it up (the camera's first images were dropped while
+        # it did): run it here, before images come, or before this size is used.
+        ready = f', set up in {est.warm_up():.0f} ms' if est.provider != CPU else ''
         self.get_logger().info(
             f'camera {self.camera_id}: {est.family} model {est.path} input '
             f'{est.input_size[0]}x{est.input_size[1]} {est.precision} on {est.provider} '
-            f'({options or "default options"}), intra-op threads '
+            f'({options or "default options"}{ready}), intra-op threads '
             f'{self._param("model.threads") or "one per core"}, score>{est.score_threshold:g}; '
             f'weights licence: {est.licence}')
         return est

@@ -232,6 +232,17 @@ class PoseEstimator:
         """Run the bare onnxruntime session on a prepared input tensor."""
         return self.session.run(self._output_names, {self._input_name: tensor})
 
+    def warm_up(self) -> float:
+        """
+        Run the model once on a blank image of its input size; return the milliseconds taken.
+
+        A GPU provider sets itself up on its first run (CUDA: kernels, cuDNN algorithms, memory;
+        TensorRT: its engine), which otherwise falls on a camera's first images.
+        """
+        t0 = time.perf_counter()
+        self.run(self.preprocess(np.zeros((*self.input_size, 3), np.uint8))[0])
+        return (time.perf_counter() - t0) * 1e3
+
     def infer(self, image: np.ndarray, order: str = 'bgr') -> Detections:
         """Detect people in one image; stage times go to ``last_timing``."""
         t0 = time.perf_counter()
