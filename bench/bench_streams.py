@@ -34,6 +34,7 @@ ROS installed: ``--providers cuda cpu --streams 1 4 8``.
 import argparse
 import multiprocessing
 import os
+import queue
 import statistics
 import sys
 import time
@@ -92,8 +93,7 @@ def _stream(index: int, path: str, provider: str, threads: int, rate: float, sec
         stages.append((t.pre_ms, t.infer_ms, t.post_ms))
         done += 1
     results.put({'index': index, 'provider': est.provider, 'warnings': est.warnings,
-                 'latency': latency, 'stages': stages, 'done': done, 'dropped': dropped,
-                 'seconds': seconds})
+                 'latency': latency, 'stages': stages, 'done': done, 'dropped': dropped})
 
 
 def run_streams(path: str, provider: str, count: int, rate: float, seconds: float) -> dict:
@@ -111,7 +111,7 @@ def run_streams(path: str, provider: str, count: int, rate: float, seconds: floa
     while len(out) < count and time.time() < deadline:
         try:
             item = results.get(timeout=1.0)
-        except Exception:  # noqa: B902 - queue.Empty, re-checked against the deadline
+        except queue.Empty:
             if not any(p.is_alive() for p in procs):
                 break
             continue
