@@ -633,8 +633,8 @@ class Pose2DNode(LifecycleNode):
         for text in est.warnings:
             self.get_logger().warning(f'camera {self.camera_id}: {text}')
         options = ', '.join(f'{k}={v}' for k, v in sorted(est.provider_options.items()))
-        # A GPU provider's first run sets it up (the camera's first images were dropped while
-        # it did): run it here, before images come, or before this size is used.
+        # A GPU provider sets itself up on its first run (0.2-0.6 s on CUDA, during which the
+        # camera's images would be replaced): make that run here, before this model is used.
         ready = f', set up in {est.warm_up():.0f} ms' if est.provider != CPU else ''
         self.get_logger().info(
             f'camera {self.camera_id}: {est.family} model {est.path} input '
