@@ -50,6 +50,12 @@ from rosbags.interfaces import QosTime
 # Topics that ``record`` without topic names leaves out (ros2 bag record -a does the same for
 # the hidden ones; /clock would feed a replayed clock back into itself).
 EXCLUDED_BY_DEFAULT = ('/rosout', '/parameter_events', '/clock')
+#: After the player sees every subscriber, the subscribers still have to see the player (each
+#: side of a DDS match is discovered on its own): a reader that has not, drops what comes
+#: (best effort) or fetches it late, out of pace (reliable). Waited once before playing.
+MATCH_SETTLE_S = 0.5
+#: How long a played reliable topic waits at the end for its readers to acknowledge it all.
+ACK_TIMEOUT_S = 5.0
 
 
 # ------------------------------------------------------------------------------------ helpers
@@ -328,6 +334,13 @@ class _Pacer:
         return time.monotonic() - t0
 
 
+def _settle(executor, seconds: float, stopped) -> None:
+    """Keep spinning ``executor`` for ``seconds`` (or until ``stopped()``)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end and not stopped():
+        executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
+
+
 def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iterable[str]] = None,
          start_offset: float = 0.0, clock: bool = True, wait_for_subscribers: float = 0.0,
          delay: float = 0.0, quiet: bool = False, context=None, stop=None,
@@ -338,8 +351,8 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
 
     ``rate`` scales the pace (2 = twice as fast, 0 = as fast as possible); ``start_offset``
     skips the first seconds; ``wait_for_subscribers`` waits up to that many seconds until every
-    played topic (or each of ``wait_topics``) has a subscriber (nothing is lost to
-    discovery); ``stop`` is an optional
+    played topic (or each of ``wait_topics``) has a subscriber, then ``MATCH_SETTLE_S`` for the
+    subscribers to see the player (nothing is lost to discovery); ``stop`` is an optional
     callable polled between messages. ``pace_topics``: after each time point (the messages
     sharing one bag timestamp), wait until every pace topic delivered one more message (at
     most ``pace_timeout`` s), so slow nodes that keep only the newest input lose nothing.
@@ -395,6 +408,8 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
                     pubs[t].get_subscription_count() > 0 for t in (wait_topics or pubs)))
                 paced = pacer is None or pacer.subscribe_ready()
                 if subscribed and paced:
+                    if wait_for_subscribers > 0:
+                        _settle(executor, MATCH_SETTLE_S, stopped)
                     break
                 executor.spin_once(timeout_sec=0.05)
             if pacer is not None and len(pacer.subs) < len(pacer.topics):
@@ -444,7 +459,7 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
                 bar.close()
             # give reliable readers the chance to fetch the tail before the process exits
             for pub in list(pubs.values()) + ([clock_pub] if clock_pub else []):
-                pub.wait_for_all_acked(Duration(seconds=2.0))
+                pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
     finally:
         reader.close()
         executor.shutdown(timeout_sec=1.0)
@@ -584,7 +599,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ply.add_argument('--no-clock', dest='clock', action='store_false',
                      help='do not publish /clock')
     ply.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
-                     help='wait up to this long until every topic has a subscriber')
+                     help='wait up to this long until every topic has a subscriber (then '
+                          f'{MATCH_SETTLE_S:g} s more, for the subscribers to see the player)')
     ply.add_argument('--delay', type=float, default=0.0, help='sleep before playing [s]')
     ply.add_argument('--pace-on', nargs='+', metavar='TOPIC',
                      help='after each time point wait until every TOPIC delivered one more '
