@@ -376,6 +376,21 @@ def test_cuda_libraries_are_preloaded_once_and_failures_reported(monkeypatch, yo
     assert open_estimator(yolo_case[0], providers='cpu').warnings == [] and len(calls) == 2
 
 
+def test_provider_options_shown_are_those_set_here_and_the_device():
+    """Of the 25 CUDA options onnxruntime reports, the estimator keeps the ones set here."""
+    from mv3dpose_ros.pose2d import estimator as est_mod
+
+    class Session:
+        def get_provider_options(self):
+            return {'CUDAExecutionProvider': {
+                'device_id': '1', 'cudnn_conv_algo_search': 'HEURISTIC', 'use_tf32': '1',
+                'gpu_mem_limit': '18446744073709551615', 'arena_extend_strategy': 'x'}}
+
+    assert est_mod._options_in_use(Session(), 'CUDAExecutionProvider', '/m/a.onnx') == {
+        'device_id': '1', 'cudnn_conv_algo_search': 'HEURISTIC'}
+    assert est_mod._options_in_use(Session(), 'CPUExecutionProvider', '/m/a.onnx') == {}
+
+
 def test_cuda_requested_on_a_cpu_only_machine_falls_back_to_cpu(yolo_case):
     """A provider this onnxruntime cannot start: the model runs on the CPU, with a warning."""
     import onnxruntime as ort

@@ -147,6 +147,18 @@ def preload_cuda() -> List[str]:
     return list(_cuda_preloaded)
 
 
+def _options_in_use(session, provider: str, model_path: str) -> Dict[str, str]:
+    """
+    Return the session's values of the provider options this package sets, and the device.
+
+    onnxruntime reports all of a GPU provider's options (25 for CUDA); these are the ones a
+    user of this package changes or needs to tell the machines' GPUs apart.
+    """
+    every = session.get_provider_options().get(provider, {})
+    keys = set(_provider_options(provider, model_path)) | {'device_id'}
+    return {k: str(v) for k, v in every.items() if k in keys}
+
+
 def _provider_options(name: str, model_path: str) -> Dict[str, str]:
     """Return the options given to one provider (engine cache beside the model for TensorRT)."""
     if name == PROVIDERS['tensorrt']:
@@ -211,7 +223,7 @@ class PoseEstimator:
     layout: str = LAYOUT
     last_timing: Timing = field(default_factory=Timing)
     provider: str = CPU                     # the execution provider that runs the model
-    provider_options: Dict[str, str] = field(default_factory=dict)
+    provider_options: Dict[str, str] = field(default_factory=dict)   # those set here, and device
     warnings: List[str] = field(default_factory=list)   # e.g. a provider fell back to CPU
     precision: str = 'fp32'                 # 'int8' for a quantised variant
 
@@ -517,5 +529,5 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
                             nms_iou=float(nms_iou), max_people=int(max_people),
                             metadata=metadata, licence=licence, family=found,
                             provider=chosen,
-                            provider_options=dict(session.get_provider_options().get(chosen, {})),
+                            provider_options=_options_in_use(session, chosen, path),
                             warnings=warnings, precision=sidecar.get('precision', 'fp32'))
