@@ -26,11 +26,14 @@ count and execution provider:
 - capture -> tracks latency p50 / p95 (stamp -> receipt of the tracks by this process);
 - per-stage medians from ``/diagnostics``: transport (capture -> pose2d receipt), wait (behind
   the previous inference), decode, pre, inference, post, publish, fusion (``Fusion.step``);
-- drops by stage: lost before pose2d (published - received: DDS / QoS), pose2d newest-only
-  (replaced before inference), fusion synchroniser (dropped by sync);
+- drops by stage: lost before pose2d (published - received: DDS / QoS; whole run),
+  pose2d newest-only (replaced before inference), fusion synchroniser (dropped by sync);
 - the sets fusion_node emitted, how many were partial, and how many incomplete sets were
   decided on a camera's skip notice (``persons_2d/skipped``) instead of waiting out
   ``sync.max_wait_s`` (emitted partial, or dropped with too few views);
+
+  the last two in the measured window (the nodes' counters at its start and end, read from
+  diagnostics published once a second) and over the whole run (start-up included);
 - people found: skeletons observed in each tracks message (``last_observed`` = the set's
   stamp), per time point: the share of sets with all 3 Panoptic people, and the minimum.
 
@@ -82,6 +85,24 @@ def _load_frames(cameras: List[str]) -> Dict[str, List[np.ndarray]]:
         if any(img is None for img in out[cam]):
             raise SystemExit(f'bench_pipeline: cannot read the frames of {src} in {DATA}')
     return out
+
+
+def _counts(diags: Dict[str, Dict[str, str]]) -> Dict[str, int]:
+    """Sum the nodes' running counters in the latest diagnostics (``diags``: name -> values)."""
+    pose = [v for k, v in diags.items() if k.endswith(' inference')]
+    pipeline = [v for v in diags.values() if 'sets emitted' in v]
+
+    def fusion(key: str) -> int:
+        return int(float(pipeline[0].get(key, 0))) if pipeline else 0
+
+    return {
+        'received': sum(int(d.get('Images received', 0)) for d in pose),
+        'dropped_pose2d': sum(int(d.get('Dropped before inference (newer image arrived)', 0))
+                              for d in pose),
+        'dropped_sync': sum(int(d.get('dropped by sync', 0)) for d in diags.values()),
+        'sets emitted': fusion('sets emitted'), 'partial sets': fusion('partial sets'),
+        'skip decided': fusion('incomplete sets decided on skip notices'),
+    }
 
 
 def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider: str,
@@ -191,6 +212,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         period = 1.0 / rate
         start = time.monotonic()
         measure_from = None
+        counts_at_start: Dict[str, int] = {}
         next_t = start
         k = 0
         while True:
@@ -201,6 +223,7 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
                 observed.clear()
                 arrivals.clear()
                 published_at_start = published
+                counts_at_start = _counts(dict(diags))
             if measure_from is not None and now - measure_from >= seconds:
                 break
             if now - start > warmup_s + seconds + 60:
@@ -256,13 +279,8 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
     else:                        # capture stamp -> persons_2d published, inside pose2d_node
         inside = (_median([float(d.get('Capture to publish median (ms)', 'nan')) for d in pose]),
                   _median([float(d.get('Capture to publish p95 (ms)', 'nan')) for d in pose]))
-    received = sum(int(d.get('Images received', 0)) for d in pose)
-    dropped_pose = sum(int(d.get('Dropped before inference (newer image arrived)', 0))
-                       for d in pose)
-    dropped_sync = sum(int(d.get('dropped by sync', 0)) for d in diags.values())
-    pipeline = [v for v in diags.values() if 'sets emitted' in v]
-    sets = {k: int(float(pipeline[0].get(k, 0))) if pipeline else 0 for k in (
-        'sets emitted', 'partial sets', 'incomplete sets decided on skip notices')}
+    whole = _counts(diags)
+    window_counts = {k: v - counts_at_start.get(k, 0) for k, v in whole.items()}
     per_point = {}
     for point, seen in observed:
         per_point.setdefault(point, []).append(seen)
@@ -273,8 +291,8 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         'cameras': len(cameras), 'provider': provider, 'rate': rate, 'other': other[0],
         'published_rate': sets_published / window, 'tracks_rate': len(latency) / window,
         'p50': _percentile(latency, 50), 'p95': _percentile(latency, 95), 'inside': inside,
-        'stage': stage, 'published_images': published * len(cameras), 'received': received,
-        'dropped_pose2d': dropped_pose, 'dropped_sync': dropped_sync, 'sets': sets,
+        'stage': stage, 'published_images': published * len(cameras),
+        'whole': whole, 'window': window_counts, 'seconds': window,
         'people': {p: (sum(1 for n in v if n >= 3), len(v), min(v)) for p, v in
                    sorted(per_point.items())},
         'threads': [d.get('Intra-op threads', '?') for d in pose][:1],
@@ -297,17 +315,20 @@ def _print(r: dict) -> None:
           f'received here p50 {r["p50"]:.0f} p95 {r["p95"]:.0f})', flush=True)
     print('  stage medians (ms): ' + ', '.join(f'{k} {v:.1f}' for k, v in st.items()),
           flush=True)
-    lost = r['published_images'] - r['received']
-    print(f'  drops: before pose2d (DDS/QoS) {lost} of {r["published_images"]} images, '
-          f'pose2d newest-only {r["dropped_pose2d"]}, fusion sync {r["dropped_sync"]}; '
-          f'{r["other"]} outputs not stamped like a published set (idle steps) not counted',
-          flush=True)
+    win, whole = r['window'], r['whole']
+    lost = r['published_images'] - whole['received']
+    print(f'  drops in the {r["seconds"]:.0f} s window (whole run): pose2d newest-only '
+          f'{win["dropped_pose2d"]} of {win["received"]} images received '
+          f'({whole["dropped_pose2d"]} of {whole["received"]}), fusion sync '
+          f'{win["dropped_sync"]} ({whole["dropped_sync"]}); before pose2d (DDS/QoS, whole '
+          f'run) {lost} of {r["published_images"]} published; {r["other"]} outputs not '
+          'stamped like a published set (idle steps) not counted', flush=True)
     if r['cameras'] > 1:
-        s = r['sets']
-        print(f'  sets (whole run): {s["sets emitted"]} emitted, {s["partial sets"]} partial, '
-              f'{s["incomplete sets decided on skip notices"]} incomplete sets decided on a '
-              'skip notice (persons_2d/skipped: emitted partial, or dropped with too few '
-              'views)', flush=True)
+        print(f'  sets in the window (whole run): {win["sets emitted"]} emitted '
+              f'({whole["sets emitted"]}), {win["partial sets"]} partial '
+              f'({whole["partial sets"]}), {win["skip decided"]} incomplete sets decided on a '
+              f'skip notice ({whole["skip decided"]}; persons_2d/skipped: emitted partial, or '
+              'dropped with too few views)', flush=True)
     print(f'  people: {"sets" if r["cameras"] > 1 else "images"} with all 3 observed '
           f'{full}/{sets}; per time point {people}', flush=True)
 
