@@ -539,6 +539,48 @@ def test_int8_needs_real_calibration_frames(tmp_path, capsys):
     assert '--calibration-images' in capsys.readouterr().err
 
 
+def test_int8_calibration_frames_come_from_a_folder_a_video_or_a_bag(tmp_path):
+    """Spread over the source, in BGR whatever the encoding; a bad source or frame is named."""
+    from mv3dpose_ros.io.bag import BagWriter
+    from mv3dpose_ros.ros.images import bgr_to_image, numpy_to_compressed
+    from rclpy.serialization import serialize_message
+    video = str(tmp_path / 'clip.avi')
+    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
+    for k in range(40):
+        writer.write(np.full((48, 64, 3), 5 * k, np.uint8))
+    writer.release()
+    levels = [int(f.mean()) for f in fetch_mod.calibration_frames(video, limit=4)]
+    assert len(levels) == 4 and all(abs(a - b) <= 3 for a, b in zip(levels, [0, 50, 100, 150]))
+
+    red = np.zeros((48, 64, 3), np.uint8)
+    red[..., 2] = 255                                            # BGR
+    bag = tmp_path / 'rig'
+    with BagWriter(bag) as out:
+        out.add_topic('/cam_a/image_raw', 'sensor_msgs/msg/Image')
+        out.add_topic('/cam_b/image_raw/compressed', 'sensor_msgs/msg/CompressedImage')
+        out.add_topic('/cam_a/persons_2d', 'std_msgs/msg/String')   # not an image: ignored
+        for k in range(10):
+            out.write('/cam_a/image_raw', 2 * k, serialize_message(bgr_to_image(red, 'rgb8')))
+            out.write('/cam_b/image_raw/compressed', 2 * k + 1,
+                      serialize_message(numpy_to_compressed(red, fmt='png')))
+    frames = list(fetch_mod.calibration_frames(str(bag), limit=5))
+    assert len(frames) == 5                                       # every 4th of 20 images
+    assert all(f.shape == (48, 64, 3) and np.array_equal(f[0, 0], [0, 0, 255]) for f in frames)
+
+    with BagWriter(tmp_path / 'bad') as out:
+        out.add_topic('/cam_a/image_raw', 'sensor_msgs/msg/Image')
+        out.write('/cam_a/image_raw', 0, serialize_message(bgr_to_image(red, 'bgr8'))[:-100])
+    with pytest.raises(fetch_mod.FetchError, match='/cam_a/image_raw at 0 ns cannot be decoded'):
+        list(fetch_mod.calibration_frames(str(tmp_path / 'bad')))
+    with BagWriter(tmp_path / 'no_images') as out:
+        out.add_topic('/chatter', 'std_msgs/msg/String')
+    with pytest.raises(fetch_mod.FetchError, match='no sensor_msgs/Image'):
+        list(fetch_mod.calibration_frames(str(tmp_path / 'no_images')))
+    (tmp_path / 'notes.txt').write_text('x')
+    with pytest.raises(fetch_mod.FetchError, match='not a folder of images, a video'):
+        list(fetch_mod.calibration_frames(str(tmp_path / 'notes.txt')))
+
+
 def test_a_video_is_indexed_like_a_folder(tmp_path):
     """Looping publishers of a recorded rig show frame k of every camera at the same instant."""
     from mv3dpose_ros.nodes.image_publisher import FrameSource, VIDEO_SEEK_FRAMES

