@@ -357,13 +357,13 @@ def _bag_frames(path: str, limit: int) -> Iterator[np.ndarray]:
     from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
     try:
         with BagReader(path) as bag:
-            topics = {t: BAG_IMAGE_TYPES[s.msgtype] for t, s in bag.topics().items()
+            images = {t: s for t, s in bag.topics().items()
                       if s.msgtype in BAG_IMAGE_TYPES and s.count}
-            if not topics:
+            if not images:
                 raise FetchError(f'calibration bag {path!r} has no sensor_msgs/Image or '
                                  f'CompressedImage messages: {NO_PEOPLE_HINT}')
-            total = sum(bag.topics()[t].count for t in topics)
-            step = max(1, total // limit)
+            topics = {t: BAG_IMAGE_TYPES[s.msgtype] for t, s in images.items()}
+            step = max(1, sum(s.count for s in images.values()) // limit)
             taken = 0
             for index, m in enumerate(bag.messages(topics)):
                 if taken >= limit:
