@@ -539,6 +539,34 @@ def test_int8_needs_real_calibration_frames(tmp_path, capsys):
     assert '--calibration-images' in capsys.readouterr().err
 
 
+def test_int8_without_sizes_quantises_every_size_in_the_cache(tmp_path, monkeypatch):
+    """``model fetch --int8`` alone: the int8 twin of each fp32 size built (auto's ladder)."""
+    cache = tmp_path / 'models'
+    cache.mkdir()
+    for size, precision in (((192, 320), 'fp32'), ((384, 640), 'fp32'), ((256, 448), 'fp32'),
+                            ((288, 512), 'int8')):
+        path = models.model_file('yolo11n-pose', size, str(cache), precision)
+        open(path, 'wb').close()
+        with open(models.sidecar_file(path), 'w') as f:
+            json.dump({'name': 'yolo11n-pose', 'input_size': list(size),
+                       'precision': precision}, f)
+    asked = {}
+
+    def record(kind):
+        return lambda name, sizes, *args, **kw: asked.setdefault(kind, list(sizes)) and []
+
+    monkeypatch.setattr(fetch_mod, 'fetch', record('fp32'))
+    monkeypatch.setattr(fetch_mod, 'fetch_int8', record('int8'))
+    args = ['model', 'fetch', '--int8', '--calibration-images', str(tmp_path), '--cache-dir',
+            str(cache)]
+    assert cli_main(args) == 0
+    ladder = [(384, 640), (192, 320), (256, 448)]        # registry order, then the others
+    assert asked == {'fp32': ladder, 'int8': ladder}
+    asked.clear()
+    assert cli_main(args + ['--size', '192x320']) == 0   # explicit sizes win
+    assert asked == {'fp32': [(192, 320)], 'int8': [(192, 320)]}
+
+
 def test_int8_calibration_frames_come_from_a_folder_a_video_or_a_bag(tmp_path):
     """Spread over the source, in BGR whatever the encoding; a bad source or frame is named."""
     from mv3dpose_ros.io.bag import BagWriter
@@ -552,20 +580,20 @@ def test_int8_calibration_frames_come_from_a_folder_a_video_or_a_bag(tmp_path):
     levels = [int(f.mean()) for f in fetch_mod.calibration_frames(video, limit=4)]
     assert len(levels) == 4 and all(abs(a - b) <= 3 for a, b in zip(levels, [0, 50, 100, 150]))
 
-    red = np.zeros((48, 64, 3), np.uint8)
-    red[..., 2] = 255                                            # BGR
+    red, green = np.zeros((48, 64, 3), np.uint8), np.zeros((48, 64, 3), np.uint8)
+    red[..., 2] = green[..., 1] = 255                            # BGR
     bag = tmp_path / 'rig'
     with BagWriter(bag) as out:
         out.add_topic('/cam_a/image_raw', 'sensor_msgs/msg/Image')
         out.add_topic('/cam_b/image_raw/compressed', 'sensor_msgs/msg/CompressedImage')
         out.add_topic('/cam_a/persons_2d', 'std_msgs/msg/String')   # not an image: ignored
-        for k in range(10):
-            out.write('/cam_a/image_raw', 2 * k, serialize_message(bgr_to_image(red, 'rgb8')))
-            out.write('/cam_b/image_raw/compressed', 2 * k + 1,
-                      serialize_message(numpy_to_compressed(red, fmt='png')))
+        for k in range(10):                      # cam_a's 10 images, then cam_b's 10
+            out.write('/cam_a/image_raw', k, serialize_message(bgr_to_image(red, 'rgb8')))
+            out.write('/cam_b/image_raw/compressed', 10 + k,
+                      serialize_message(numpy_to_compressed(green, fmt='png')))
     frames = list(fetch_mod.calibration_frames(str(bag), limit=5))
-    assert len(frames) == 5                                       # every 4th of 20 images
-    assert all(f.shape == (48, 64, 3) and np.array_equal(f[0, 0], [0, 0, 255]) for f in frames)
+    assert [f.shape for f in frames] == [(48, 64, 3)] * 5         # every 4th of 20 images
+    assert [tuple(f[0, 0]) for f in frames] == [(0, 0, 255)] * 3 + [(0, 255, 0)] * 2
 
     with BagWriter(tmp_path / 'bad') as out:
         out.add_topic('/cam_a/image_raw', 'sensor_msgs/msg/Image')

@@ -45,11 +45,10 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 import cv2
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, DEFAULT_STORAGE, get_typestore
 from mv3dpose_ros.io.bag import make_qos, STORAGES, temp_path_beside
+from mv3dpose_ros.io.media import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
 from mv3dpose_ros.ros.names import camera_namespace
 import numpy as np
 
-IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp', '.tif', '.tiff', '.ppm', '.pgm')
-VIDEO_EXTENSIONS = ('.mp4', '.avi', '.mov', '.mkv', '.webm', '.mpg', '.mpeg')
 DEFAULT_START_TIME = 1_700_000_000.0   # [s] fixed epoch: bags are reproducible, stamps never 0
 TRACKS_TOPIC = '/mv3dpose/tracks'
 TRACKS_TYPE = 'mv3dpose_msgs/msg/TrackedSkeletonArray'

@@ -66,7 +66,7 @@ def _sources(root: str, calibration: Optional[str], cameras: Optional[List[str]]
              ) -> Tuple[Dict[str, str], dict, List[str]]:
     """Return ``(camera -> folder or video, calibrated cameras, notes)``."""
     from mv3dpose_ros.commands.convert import camera_sources, ConvertError, load_cameras
-    from mv3dpose_ros.commands.convert import VIDEO_EXTENSIONS
+    from mv3dpose_ros.io.media import VIDEO_EXTENSIONS
     notes: List[str] = []
     if calibration:
         cams = load_cameras(calibration, cameras)

@@ -44,12 +44,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help=f'model to build (default {models.DEFAULT_MODEL})')
     f.add_argument('--size', action='append', default=[],
                    help='static input size N or HxW (height x width); repeat for several; '
-                        "default: the model's first size (640 YOLO, 256 MoveNet)")
+                        "default: the model's first size (640 YOLO, 256 MoveNet), with --int8 "
+                        'every size in the cache')
     f.add_argument('--cache-dir', default=None, help=cache_help)
     f.add_argument('--force', action='store_true', help='rebuild even when present')
     f.add_argument('--int8', action='store_true',
                    help='also build the int8-quantised variant of each size (YOLO only; '
-                        'needs --calibration-images)')
+                        'needs --calibration-images); without --size, of every size already '
+                        'in the cache (make setup fetched the sizes model.input_size auto '
+                        'steps through)')
     f.add_argument('--calibration-images', metavar='SOURCE', default=None,
                    help='real frames of your cameras (with people) to calibrate the int8 '
                         'activation ranges on: a folder of images, a video, or a rosbag2 '
@@ -69,10 +72,13 @@ def _fetch(args) -> int:
     from mv3dpose_ros.pose2d.fetch import fetch, FetchError
     spec = models.get_spec(args.model)
     try:
-        sizes = [models.parse_size(s, spec) for s in args.size] or [spec.default_size]
+        sizes = [models.parse_size(s, spec) for s in args.size]
     except ValueError as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 2
+    if not sizes and args.int8:          # the int8 twin of every size built (the auto ladder)
+        sizes = models.fetched_sizes(spec.name, args.cache_dir)
+    sizes = sizes or [spec.default_size]
     print(f'[fetch] {spec.name}: weights licence {spec.licence}')
     print(f'[fetch] {spec.notice}')
     if args.int8 and not args.calibration_images:

@@ -51,6 +51,7 @@ import threading
 from typing import Any, Dict, List, Optional, Tuple
 
 import cv2
+from mv3dpose_ros.io.media import IMAGE_EXTENSIONS
 from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy_to_compressed
 from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import ns_to_stamp
@@ -73,7 +74,6 @@ PUBLISH_ENCODINGS = ('bgr8', 'rgb8', 'mono8', 'bgra8', 'rgba8', 'mono16', 'yuv42
 WIRE_CACHE_BYTES = 512 * 1024 * 1024
 #: a video is stepped forward frame by frame (decoding them) up to this many, else it seeks
 VIDEO_SEEK_FRAMES = 64
-IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp', '.tif', '.tiff', '.webp', '.ppm', '.pgm')
 
 PARAMETERS = {
     'source': ('', 'folder of images (sorted by name) or a video file'),

@@ -50,8 +50,8 @@ from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.pose2d.estimator import CPU, DEFAULT_SCORE, ModelError, open_estimator
 from mv3dpose_ros.pose2d.estimator import PoseEstimator
-from mv3dpose_ros.pose2d.models import (fit_size, get_spec, list_fetched, model_file,
-                                        ModelNotFound, parse_size, resolve_model_path, size_tag)
+from mv3dpose_ros.pose2d.models import (fetched_sizes, fit_size, get_spec, ModelNotFound,
+                                        parse_size, resolve_model_path, size_tag)
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
                                           WARN, WindowStats)
@@ -662,14 +662,8 @@ class Pose2DNode(LifecycleNode):
 
     def _fetched_sizes(self) -> List[Tuple[int, int]]:
         """Return the sizes of the registered model in the cache: registry order, then others."""
-        spec = get_spec(self._param('model.name'))
-        cache = self._param('model.cache_dir') or None
-        precision = self._param('model.precision')
-        extra = {tuple(meta['input_size']) for _, meta in list_fetched(cache)
-                 if meta.get('name') == spec.name and len(meta.get('input_size') or ()) == 2
-                 and meta.get('precision', 'fp32') == precision}
-        return [s for s in list(spec.sizes) + sorted(extra - set(spec.sizes))
-                if os.path.isfile(model_file(spec.name, s, cache, precision))]
+        return fetched_sizes(self._param('model.name'), self._param('model.cache_dir') or None,
+                             self._param('model.precision'))
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Load the model and create the publishers."""

@@ -37,6 +37,7 @@ from typing import Callable, Iterable, Iterator, List, Optional, Tuple
 import zipfile
 
 import cv2
+from mv3dpose_ros.io.media import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
 from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec,
                                         read_sidecar, sha256_file, sidecar_file, size_tag)
 import numpy as np
@@ -286,10 +287,6 @@ def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[
     return paths
 
 
-#: Image files read as calibration frames for ``quantize_int8``.
-IMAGE_EXTENSIONS = ('.jpg', '.jpeg', '.png', '.bmp')
-#: Video files read as calibration frames (any container OpenCV's FFmpeg build opens).
-VIDEO_EXTENSIONS = ('.mp4', '.avi', '.mov', '.mkv', '.webm', '.mpg', '.mpeg')
 #: Bag message types read as calibration frames -> whether the type is compressed.
 BAG_IMAGE_TYPES = {'sensor_msgs/msg/Image': False, 'sensor_msgs/msg/CompressedImage': True}
 NO_PEOPLE_HINT = 'int8 quantisation needs real frames of your cameras, with people in them'
@@ -300,8 +297,8 @@ def calibration_images(folder: str, limit: int = 64) -> List[str]:
     found = sorted(os.path.join(root, f) for root, _, files in os.walk(folder) for f in files
                    if f.lower().endswith(IMAGE_EXTENSIONS))
     if not found:
-        raise FetchError(f'no calibration images (*.jpg, *.png) below {folder!r}: '
-                         f'{NO_PEOPLE_HINT}')
+        raise FetchError(f'no calibration images ({", ".join(IMAGE_EXTENSIONS)}) below '
+                         f'{folder!r}: {NO_PEOPLE_HINT}')
     step = max(1, len(found) // limit)
     return found[::step][:limit]
 

@@ -323,3 +323,14 @@ def list_fetched(directory: Optional[str] = None) -> List[Tuple[str, dict]]:
             path = os.path.join(root, entry)
             out.append((path, read_sidecar(path) or {}))
     return out
+
+
+def fetched_sizes(name: str, directory: Optional[str] = None,
+                  precision: str = 'fp32') -> List[Tuple[int, int]]:
+    """Return the sizes of model ``name`` built in the cache: registry order, then the others."""
+    spec = get_spec(name)
+    extra = {tuple(meta['input_size']) for _, meta in list_fetched(directory)
+             if meta.get('name') == spec.name and len(meta.get('input_size') or ()) == 2
+             and meta.get('precision', 'fp32') == precision}
+    return [s for s in list(spec.sizes) + sorted(extra - set(spec.sizes))
+            if os.path.isfile(model_file(spec.name, s, directory, precision))]
