@@ -310,9 +310,8 @@ class ImageFeeder:
         self.det_pub = self.node.create_publisher(Person2DArray, '/cam00_03/persons_2d',
                                                   reliable_qos(5))
 
-    def matched(self):
-        return self.image_pub.get_subscription_count() > 0 and \
-            self.det_pub.get_subscription_count() > 0
+    def matched(self):                 # the images only once a client watches their channel
+        return self.det_pub.get_subscription_count() > 0
 
     def publish(self):
         self.image_pub.publish(self.image)
@@ -330,11 +329,24 @@ def test_images_with_the_2d_skeletons_drawn(shared_data, tmp_path):
     topic = '/cam00_03/image_skeletons'
     with running_view(['--rig', rig, '--image-topic', '/{camera}/image_raw'], tmp_path,
                       feeder) as (url, proc, log_path):
+        async def until(test, timeout):
+            deadline = time.monotonic() + timeout
+            while not test() and time.monotonic() < deadline:
+                await asyncio.sleep(0.05)
+            return test()
+
+        def image_subscribers():
+            return feeder.image_pub.get_subscription_count()
+
         async def session():
             async with FoxgloveClient(url) as client:
                 await client.wait_for_topics([topic], 30.0)
                 adv = client.topics()[topic]
+                await asyncio.sleep(0.5)
+                assert image_subscribers() == 0, 'images taken with nobody watching'
                 await client.subscribe([topic])
+                assert await until(lambda: image_subscribers() == 1, 15.0), \
+                    'the watched camera images were not subscribed: ' + log_path.read_text()
                 await asyncio.sleep(0.3)
                 for _ in range(3):
                     feeder.publish()
@@ -343,6 +355,9 @@ def test_images_with_the_2d_skeletons_drawn(shared_data, tmp_path):
                         return adv, got
                 return adv, []
         adv, got = asyncio.run(session())
+        assert asyncio.run(until(lambda: image_subscribers() == 0, 15.0)), \
+            'the images stayed subscribed after the client left: ' + log_path.read_text()
+        assert 'no longer watched' in log_path.read_text()
     assert adv['schemaName'] == 'foxglove.CompressedImage' and adv['encoding'] == 'protobuf'
     assert got, 'no annotated image received: ' + log_path.read_text()
     msg = got[0].decoded
