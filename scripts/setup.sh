@@ -120,10 +120,12 @@ if [ "${MV3DPOSE_SKIP_MODEL:-0}" != 1 ]; then
   # 640x640 (default), 384x640 (16:9 images) and 640x384 (portrait): model.input_size auto
   # picks the one fitting the camera; 288x512, 224x384, 192x320 and their portrait twins are
   # the steps inference_rate_hz auto shrinks to when a camera outpaces inference (down to
-  # model.min_input_side). Each extra size is one more export of a few seconds.
+  # model.min_input_side). Each extra size is one more export of a few seconds. Then the int8
+  # twin of each (model.precision auto takes it on the CPU: 10-15 % less time), calibrated on
+  # the model's sample images (`--int8 --calibration-images SOURCE` refits it to your cameras).
   if ! (. ./env.sh && mv3dpose model fetch --model yolo11n-pose --size 640 --size 384x640 \
         --size 640x384 --size 288x512 --size 512x288 --size 224x384 --size 384x224 \
-        --size 192x320 --size 320x192) \
+        --size 192x320 --size 320x192 && mv3dpose model fetch --model yolo11n-pose --int8) \
         > log/model-fetch.log 2>&1; then
     tail -n 20 log/model-fetch.log >&2
     fail 'model fetch' 'see log/model-fetch.log; MV3DPOSE_SKIP_MODEL=1 skips it (model tests skip)'

@@ -203,23 +203,49 @@ def test_crafted_model_end_to_end(ros_context, tmp_path):
             n.destroy_node()
 
 
-def _fake_cache(tmp_path, sizes):
-    """Return a model cache holding crafted 'yolo11n-pose' files of ``sizes`` (sidecars too)."""
+def _fake_cache(tmp_path, sizes, int8=()):
+    """Return a model cache of crafted 'yolo11n-pose' files: fp32 ``sizes``, ``int8`` sizes."""
     import hashlib
     import json
     cache = tmp_path / 'cache'
     cache.mkdir()
     out = np.zeros((1, 56, 8400), np.float32)
     out[0, :5, 0] = [100, 100, 50, 80, 0.9]
-    for hw in sizes:
+    for hw, precision in [(s, 'fp32') for s in sizes] + [(s, 'int8') for s in int8]:
         data = make_constant_model([('images', np.float32, [1, 3, *hw])], {'output0': out},
                                    {'task': 'pose'})
-        path = models.model_file('yolo11n-pose', hw, str(cache))
+        path = models.model_file('yolo11n-pose', hw, str(cache), precision)
         open(path, 'wb').write(data)
         open(models.sidecar_file(path), 'w').write(json.dumps(
             {'name': 'yolo11n-pose', 'family': 'yolo-pose', 'input_size': list(hw),
-             'onnx_sha256': hashlib.sha256(data).hexdigest()}))
+             'precision': precision, 'onnx_sha256': hashlib.sha256(data).hexdigest()}))
     return str(cache)
+
+
+def test_precision_auto_runs_int8_on_the_cpu_and_fp32_on_a_gpu(ros_context, tmp_path,
+                                                               monkeypatch):
+    """model.precision auto (default): a size's int8 twin where fetched, on the CPU only."""
+    from mv3dpose_ros.nodes import pose2d_node
+    from mv3dpose_ros.pose2d.estimator import CPU
+    cache = _fake_cache(tmp_path, [(384, 640), (192, 320)], int8=[(288, 512), (192, 320)])
+    node = pose2d_node.Pose2DNode(context=ros_context, namespace='/camprec', parameter_overrides=[
+        Parameter('model.cache_dir', value=cache), Parameter('model.threads', value=1)])
+    try:
+        assert node.active, node.error
+        assert node.get_parameter('model.precision').value == 'auto'
+        assert node._fetched_sizes() == [(384, 640), (288, 512), (192, 320)]
+        for size, precision in (((192, 320), 'int8'), ((288, 512), 'int8'),
+                                ((384, 640), 'fp32')):
+            path = node._registered_path(size)
+            assert path == models.model_file('yolo11n-pose', size, cache, precision)
+            assert node._open(path).precision == precision
+        monkeypatch.setattr(pose2d_node, 'resolve_providers',
+                            lambda request: (['CUDAExecutionProvider', CPU], []))
+        assert node._fetched_sizes() == [(384, 640), (192, 320)]     # fp32 only on a GPU
+        assert node._registered_path((192, 320)) == models.model_file(
+            'yolo11n-pose', (192, 320), cache)
+    finally:
+        node.destroy_node()
 
 
 @pytest.mark.parametrize('image_hw, sizes, chosen', [

@@ -125,7 +125,7 @@ def test_same_person_agrees_across_views(detections):
 
 @pytest.mark.parametrize('size, precision', [((384, 640), 'fp32'), ((288, 512), 'fp32'),
                                              ((224, 384), 'fp32'), ((384, 640), 'int8'),
-                                             ((640, 640), 'int8')])
+                                             ((640, 640), 'int8'), ((192, 320), 'int8')])
 def test_faster_variants_still_find_the_three_people(shared_data, size, precision):
     """
     The fitted sizes and the int8 variants triangulate the 3 people at every time point.
@@ -138,7 +138,7 @@ def test_faster_variants_still_find_the_three_people(shared_data, size, precisio
     path = model_file('yolo11n-pose', size, None, precision)
     if not os.path.isfile(path):
         pytest.skip(f'{path} not fetched (mv3dpose model fetch --size {size[0]}x{size[1]}'
-                    f'{" --int8 --calibration-images DIR" if precision == "int8" else ""})')
+                    f'{" --int8" if precision == "int8" else ""})')
     demo = os.path.join(shared_data, 'panoptic_demo')
     est = open_estimator(path, threads=2)
     assert est.precision == precision == (read_sidecar(path) or {}).get('precision', 'fp32')
@@ -198,6 +198,11 @@ def test_int8_calibrated_on_a_recorded_bag_finds_the_three_people(shared_data, t
     assert meta['quantised_from'] == read_sidecar(fp32)['onnx_sha256']
     est = open_estimator(path, threads=2)
     assert est.precision == 'int8'
+    _assert_int8_close_to_fp32(est, fp32, demo)
+
+
+def _assert_int8_close_to_fp32(est, fp32: str, demo: str) -> None:
+    """Assert the 3 people at every time point, keypoints a few px from fp32's at that size."""
     views = _assert_three_people_at_every_time_point(est, demo)
     reference = _keypoints(open_estimator(fp32, threads=2), demo)
     shifts = []
@@ -210,3 +215,25 @@ def test_int8_calibrated_on_a_recorded_bag_finds_the_three_people(shared_data, t
             if med:
                 shifts.append(min(med))
     assert len(shifts) >= 60 and np.median(shifts) < 5.0, np.median(shifts)
+
+
+@pytest.mark.parametrize('size', [(192, 320), (384, 640)])
+def test_int8_that_setup_builds_holds_on_frames_it_never_saw(shared_data, size):
+    """
+    The int8 ``make setup`` builds holds on real frames it never saw.
+
+    It is what ``model.precision`` auto runs on the CPU, calibrated on the model's sample
+    images only; on the Panoptic views it still finds the 3 people at every time point,
+    keypoints within a few px of fp32 at the same size.
+    """
+    from mv3dpose_ros.pose2d.models import model_file, read_sidecar
+    path, fp32 = (model_file('yolo11n-pose', size, None, p) for p in ('int8', 'fp32'))
+    if not (os.path.isfile(path) and os.path.isfile(fp32)):
+        pytest.skip(f'{path} not fetched (make setup builds it)')
+    source = read_sidecar(path)['quantisation']['calibration_source']
+    if not source.startswith('samples:'):
+        pytest.skip(f'{path} was calibrated on {source}, not on the sample images')
+    assert 'bus.jpg' in source and 'zidane.jpg' in source
+    est = open_estimator(path, threads=2)
+    assert est.precision == 'int8'
+    _assert_int8_close_to_fp32(est, fp32, demo=os.path.join(shared_data, 'panoptic_demo'))

