@@ -121,7 +121,7 @@ if [ "${MV3DPOSE_SKIP_MODEL:-0}" != 1 ]; then
   # picks the one fitting the camera; 288x512, 224x384, 192x320 and their portrait twins are
   # the steps inference_rate_hz auto shrinks to when a camera outpaces inference (down to
   # model.min_input_side). Each extra size is one more export of a few seconds. Then the int8
-  # twin of each (model.precision auto takes it on the CPU: 10-15 % less time), calibrated on
+  # twin of each (model.precision auto takes it on the CPU: 15-20 % less time), calibrated on
   # the model's sample images (`--int8 --calibration-images SOURCE` refits it to your cameras).
   if ! (. ./env.sh && mv3dpose model fetch --model yolo11n-pose --size 640 --size 384x640 \
         --size 640x384 --size 288x512 --size 512x288 --size 224x384 --size 384x224 \

@@ -126,7 +126,7 @@ PARAMETERS = {
     'model.threads': (0, 'onnxruntime intra-op threads (0 = one per core; bringup gives each '
                          'of N cameras cores / N)', False),
     'model.precision': ('auto', 'auto | fp32 | int8: variant of the registered model; auto = '
-                                'int8 on the CPU where fetched (make setup builds it; 10-15 % '
+                                'int8 on the CPU where fetched (make setup builds it; 15-20 % '
                                 'less time, see README for its accuracy), else fp32', False),
     'model.providers': ('auto', 'onnxruntime execution providers: auto (TensorRT where its '
                                 'libraries load, CUDA, OpenVINO, CPU: the first available) or a '
