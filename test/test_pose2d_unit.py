@@ -577,6 +577,12 @@ def test_int8_without_frames_calibrates_on_the_checked_sample_images(tmp_path, m
         fetch_mod.sample_frames(models.get_spec('movenet-multipose'), str(tmp_path / 'w3'))
 
 
+def test_int8_of_a_movenet_is_refused_before_anything_is_built(tmp_path, monkeypatch):
+    monkeypatch.setattr(fetch_mod, 'fetch', lambda *a, **kw: pytest.fail('built fp32'))
+    with pytest.raises(fetch_mod.FetchError, match='yolo-pose'):
+        fetch_mod.fetch_int8('movenet-multipose', [], directory=str(tmp_path))
+
+
 def test_precision_auto_takes_int8_on_the_cpu_where_fetched(tmp_path):
     cache = str(tmp_path)
     int8 = models.model_file('yolo11n-pose', (192, 320), cache, 'int8')

@@ -508,6 +508,9 @@ def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]],
     (``sample_frames``). Idempotent like ``fetch``.
     """
     spec = get_spec(name)
+    if spec.family != 'yolo-pose':
+        raise FetchError(f'int8 quantisation is implemented for yolo-pose models, not '
+                         f'{spec.family}')
     sizes = [tuple(s) for s in sizes] or [spec.default_size]
     fp32 = fetch(name, sizes, directory=directory, force=force, log=log)
     root = cache_dir(directory)
