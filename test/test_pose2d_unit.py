@@ -577,6 +577,36 @@ def test_int8_without_frames_calibrates_on_the_checked_sample_images(tmp_path, m
         fetch_mod.sample_frames(models.get_spec('movenet-multipose'), str(tmp_path / 'w3'))
 
 
+def test_int8_frames_given_replace_another_calibration_none_given_keep_it(tmp_path,
+                                                                          monkeypatch):
+    """make setup's sample calibration yields to a rig's frames, and never overwrites them."""
+    fp32 = models.model_file('yolo11n-pose', (192, 320), str(tmp_path))
+    open(fp32, 'wb').write(b'fp32')
+    with open(models.sidecar_file(fp32), 'w') as f:
+        json.dump({'name': 'yolo11n-pose', 'input_size': [192, 320], 'onnx_sha256': 'f'}, f)
+    calibrated = []
+
+    def quantize(src, frames, out, log):
+        calibrated.append(len(list(frames)))
+        open(out, 'wb').write(b'int8 %d' % len(calibrated))
+        return {'precision': 'int8', 'quantised_from': 'f', 'quantisation': {}}
+
+    monkeypatch.setattr(fetch_mod, 'fetch', lambda *a, **kw: [fp32])
+    monkeypatch.setattr(fetch_mod, 'quantize_int8', quantize)
+    monkeypatch.setattr(fetch_mod, '_check_loads', lambda *a: None)
+    monkeypatch.setattr(fetch_mod, 'sample_frames', lambda *a: [np.zeros((8, 8, 3))] * 4)
+    monkeypatch.setattr(fetch_mod, 'calibration_frames', lambda src: [np.zeros((8, 8, 3))] * 9)
+    frames_dir = str(tmp_path / 'rig_frames')
+    for source, expected in ((None, [4]), (None, [4]), (frames_dir, [4, 9]),
+                             (frames_dir, [4, 9]), (None, [4, 9])):
+        fetch_mod.fetch_int8('yolo11n-pose', [(192, 320)], source, directory=str(tmp_path),
+                             log=lambda _: None)
+        assert calibrated == expected, (source, calibrated)
+    meta = models.read_sidecar(models.model_file('yolo11n-pose', (192, 320), str(tmp_path),
+                                                 'int8'))
+    assert meta['quantisation']['calibration_source'] == os.path.abspath(frames_dir)
+
+
 def test_int8_of_a_movenet_is_refused_before_anything_is_built(tmp_path, monkeypatch):
     monkeypatch.setattr(fetch_mod, 'fetch', lambda *a, **kw: pytest.fail('built fp32'))
     with pytest.raises(fetch_mod.FetchError, match='yolo-pose'):
