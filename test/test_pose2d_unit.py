@@ -579,7 +579,7 @@ def test_int8_without_frames_calibrates_on_the_checked_sample_images(tmp_path, m
 
 def test_int8_frames_given_replace_another_calibration_none_given_keep_it(tmp_path,
                                                                           monkeypatch):
-    """make setup's sample calibration yields to a rig's frames, and never overwrites them."""
+    """The sample calibration of make setup yields to a rig's frames and never overwrites them."""
     fp32 = models.model_file('yolo11n-pose', (192, 320), str(tmp_path))
     open(fp32, 'wb').write(b'fp32')
     with open(models.sidecar_file(fp32), 'w') as f:
