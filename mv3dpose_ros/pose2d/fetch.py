@@ -441,6 +441,12 @@ def _head_prefix(graph) -> str:
     return '/'.join(parts[:2]) + '/' if len(parts) > 2 else producer
 
 
+def _require_yolo(family: str) -> None:
+    """Raise ``FetchError`` unless ``family`` is one int8 quantisation is implemented for."""
+    if family != 'yolo-pose':
+        raise FetchError(f'int8 quantisation is implemented for yolo-pose models, not {family}')
+
+
 def quantize_int8(fp32_path: str, frames: Iterable[np.ndarray], out_path: str,
                   log: Callable[[str], None] = print) -> dict:
     """
@@ -458,9 +464,7 @@ def quantize_int8(fp32_path: str, frames: Iterable[np.ndarray], out_path: str,
                                           QuantType)
     from onnxruntime.quantization.shape_inference import quant_pre_process
     est = open_estimator(fp32_path, threads=0)
-    if est.family != 'yolo-pose':
-        raise FetchError(f'int8 quantisation is implemented for yolo-pose models, not '
-                         f'{est.family}')
+    _require_yolo(est.family)
     tensors = [est.preprocess(frame)[0].copy() for frame in frames]
     if not tensors:
         raise FetchError(f'no calibration frames: {NO_PEOPLE_HINT}')
@@ -506,29 +510,28 @@ def fetch_int8(name: str, sizes: Iterable[Tuple[int, int]],
     (``sample_frames``). Idempotent like ``fetch``.
     """
     spec = get_spec(name)
-    if spec.family != 'yolo-pose':
-        raise FetchError(f'int8 quantisation is implemented for yolo-pose models, not '
-                         f'{spec.family}')
+    _require_yolo(spec.family)
     sizes = [tuple(s) for s in sizes] or [spec.default_size]
     fp32 = fetch(name, sizes, directory=directory, force=force, log=log)
     root = cache_dir(directory)
     out = []
     samples: List[np.ndarray] = []
+    given = os.path.abspath(calibration_source) if calibration_source else None
     with _locked(root), tempfile.TemporaryDirectory(prefix='.samples-', dir=root) as work:
         for size, src in zip(sizes, fp32):
             path = model_file(name, size, root, 'int8')
             meta = read_sidecar(path) or {}
             # Frames given replace a calibration on other frames; none given keep any present.
-            same = not calibration_source or (meta.get('quantisation') or {}).get(
-                'calibration_source') == os.path.abspath(calibration_source)
+            same = not given or (meta.get('quantisation') or {}).get(
+                'calibration_source') == given
             if not force and same and is_current(path) and meta.get('quantised_from') == \
                     (read_sidecar(src) or {}).get('onnx_sha256'):
                 log(f'[fetch] present and verified: {path}')
                 out.append(path)
                 continue
-            if calibration_source:
+            if given:
                 frames: Iterable[np.ndarray] = calibration_frames(calibration_source)
-                source = os.path.abspath(calibration_source)
+                source = given
             else:
                 samples = samples or sample_frames(spec, work, log)
                 frames = samples
