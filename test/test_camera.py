@@ -16,7 +16,7 @@
 
 import cv2
 from mv3dpose_ros.core.camera import (CalibrationError, Camera, essential_matrix,
-                                      fundamental_matrix)
+                                      fit_image_size, fundamental_matrix)
 import numpy as np
 import pytest
 
@@ -194,3 +194,57 @@ def test_validation_accepts_and_normalises():
         make(name='')
     err = CalibrationError('bad', camera='c', field='K').with_source('rig.yaml')
     assert str(err) == "rig.yaml: camera 'c': field 'K': bad" and isinstance(err, ValueError)
+
+
+# ---------------------------------------------------------------------- image size vs calibration
+def test_image_fit_same_size_is_identity():
+    fit = fit_image_size(1920, 1080, 1920, 1080)
+    assert fit.kind == 'same' and fit.accepted and fit.scale == (1.0, 1.0)
+    poses = np.array([[[10.0, 20.0, 0.9], [0.0, 0.0, 0.0]]])
+    np.testing.assert_array_equal(fit.apply(poses), poses)
+
+
+def test_image_fit_resize_maps_keypoints_exactly():
+    """1920x1080 calibration, 960x540 image: pixel centres map as cv2.resize maps them."""
+    fit = fit_image_size(1920, 1080, 960, 540)
+    assert fit.kind == 'scaled' and fit.accepted and fit.scale == (2.0, 2.0)
+    assert 'resize' in fit.note and '960x540' in fit.note and '1920x1080' in fit.note
+    full = np.array([[[100.5, 200.5, 0.8], [1919.5, 1079.5, 1.0], [-0.5, -0.5, 0.3]]])
+    half = (full.copy() + [0.5, 0.5, 0.0]) / [2.0, 2.0, 1.0] - [0.5, 0.5, 0.0]
+    half[..., 2] = full[..., 2]
+    np.testing.assert_allclose(fit.apply(half), full, atol=1e-12)
+    # a point at the image's pixel (0, 0) lands on the centre of the 2x2 block it came from
+    np.testing.assert_allclose(fit.apply([[[0.0, 0.0, 1.0]]])[0, 0, :2], [0.5, 0.5])
+    # confidence untouched, missing joints (confidence 0, zeroed) left at zero, input kept
+    poses = np.array([[[10.0, 20.0, 0.5], [0.0, 0.0, 0.0]]] * 3)
+    out = fit.apply(poses)
+    np.testing.assert_array_equal(out[:, 1], 0.0)
+    np.testing.assert_array_equal(out[..., 2], poses[..., 2])
+    assert poses[0, 0, 0] == 10.0 and out.shape == (3, 2, 3)
+    assert fit.apply(np.zeros((0, 17, 3))).shape == (0, 17, 3)
+    # one pixel of rounding per side is still a resize (1280x720 -> 853x480)
+    assert fit_image_size(1280, 720, 853, 480).kind == 'scaled'
+
+
+def test_image_fit_codec_padding_is_a_crop_with_the_origin_kept():
+    """Pose2Sim: videos of 1080x1920 against a calibration of 1088x1920."""
+    fit = fit_image_size(1088, 1920, 1080, 1920)
+    assert fit.kind == 'cropped' and fit.accepted and fit.scale == (1.0, 1.0)
+    assert '8 columns' in fit.note and 'right/bottom' in fit.note and 'origin' in fit.note
+    poses = np.array([[[500.25, 1700.75, 0.7]]])
+    np.testing.assert_array_equal(fit.apply(poses), poses)
+    assert fit_image_size(1920, 1080, 1920, 1088).kind == 'cropped'    # padded rows
+    assert fit_image_size(1088, 1920, 1080, 1920, tolerance_px=7).kind == 'mismatch'
+    assert fit_image_size(1088, 1920, 1080, 1920, tolerance_px=-1).kind == 'mismatch'
+    assert fit_image_size(1088, 1920, 1088, 1920, tolerance_px=-1).kind == 'same'
+
+
+def test_image_fit_rotated_or_unrelated_size_is_a_mismatch():
+    fit = fit_image_size(1080, 1920, 1920, 1080)
+    assert fit.kind == 'mismatch' and not fit.accepted
+    assert 'neither a resize' in fit.note and '16 px' in fit.note
+    with pytest.raises(ValueError, match='no mapping'):
+        fit.apply(np.zeros((1, 17, 3)))
+    assert fit_image_size(1280, 720, 640, 480).kind == 'mismatch'
+    with pytest.raises(ValueError, match='positive'):
+        fit_image_size(0, 1080, 1920, 1080)

@@ -26,7 +26,7 @@ points behind the camera, so a person outside a camera's field of view never sho
 """
 
 from dataclasses import dataclass, field
-from typing import Optional, Sequence
+from typing import Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -39,6 +39,9 @@ MAX_IMAGE_SIZE = 100_000
 MAX_K = 1e7
 MAX_DISTORTION = 1e4
 MAX_TRANSLATION = 1e6
+#: Crop or padding [px per dimension] that ``fit_image_size`` accepts by default: a codec pads
+#: to a multiple of 16 (1080 -> 1088), so one macroblock.
+IMAGE_SIZE_TOLERANCE_PX = 16
 
 
 class CalibrationError(ValueError):
@@ -327,3 +330,102 @@ def essential_matrices(cameras: Sequence[Camera]) -> np.ndarray:
 def fundamental_matrix(a: Camera, b: Camera) -> np.ndarray:
     """Return F with ``u_b^T F u_a = 0`` for undistorted homogeneous pixels (u, v, 1)."""
     return b._K_inv.T @ essential_matrix(a, b) @ a._K_inv
+
+
+# ---------------------------------------------------------------------- image size vs calibration
+@dataclass(frozen=True)
+class ImageFit:
+    """
+    How keypoints of an image map to the pixel frame of the calibration the image differs from.
+
+    ``kind``: 'same' (identity), 'scaled' (a resize with the same aspect ratio: per-axis factors
+    about pixel centres), 'cropped' (a few pixels cropped or padded by a codec: identity, with
+    the image origin assumed to be the calibration's) or 'mismatch' (nothing safe: drop).
+    ``note`` says which and what was assumed, for a log line.
+    """
+
+    kind: str
+    calib_size: Tuple[int, int]     # (width, height) the camera was calibrated at
+    image_size: Tuple[int, int]     # (width, height) of the image the keypoints come from
+    scale: Tuple[float, float] = (1.0, 1.0)   # calibration px per image px (x, y)
+    note: str = ''
+
+    @property
+    def accepted(self) -> bool:
+        """Tell whether keypoints of this image can be used (after ``apply``)."""
+        return self.kind != 'mismatch'
+
+    def apply(self, poses: np.ndarray) -> np.ndarray:
+        """
+        Return ``[..., J, 3]`` poses (x, y, confidence) in the calibration's pixel frame.
+
+        Pixel-centre convention (as ``cv2.resize``): ``x' = (x + 0.5) * sx - 0.5``. Confidence
+        and joints of confidence 0 (missing, zeroed by the decoder) are left as they are.
+        """
+        if not self.accepted:
+            raise ValueError(f'no mapping from the image to the calibration: {self.note}')
+        if self.scale == (1.0, 1.0):
+            return np.asarray(poses, dtype=float)
+        poses = np.array(poses, dtype=float)
+        seen = poses[..., 2] > 0
+        for axis, s in enumerate(self.scale):
+            coord = poses[..., axis]
+            coord[seen] = (coord[seen] + 0.5) * s - 0.5
+        return poses
+
+
+def _same_aspect(calib_w: int, calib_h: int, img_w: int, img_h: int) -> bool:
+    """Tell whether one scale explains both sides up to a pixel of rounding per side."""
+    lo = max((img_w - 1) / calib_w, (img_h - 1) / calib_h)
+    hi = min((img_w + 1) / calib_w, (img_h + 1) / calib_h)
+    return lo <= hi
+
+
+def fit_image_size(calib_w: int, calib_h: int, img_w: int, img_h: int,
+                   tolerance_px: int = IMAGE_SIZE_TOLERANCE_PX) -> ImageFit:
+    """
+    Decide how keypoints of an ``img_w x img_h`` image map to a ``calib_w x calib_h`` camera.
+
+    Real rigs rarely deliver the calibrated size exactly: video codecs crop or pad to a multiple
+    of 16 (1080 vs 1088) and detectors often run on resized streams. In order: equal sizes
+    are 'same'; a difference of at most ``tolerance_px`` in each dimension is 'cropped' (scale
+    1; the crop or padding is assumed at the right/bottom, i.e. both share the origin, as codecs
+    do); the same aspect ratio (up to a pixel of rounding per side) is 'scaled'; anything else,
+    e.g. a rotated (portrait vs landscape) or wrongly assigned camera, is 'mismatch'. A negative
+    ``tolerance_px`` accepts equal sizes only.
+    """
+    calib, image = (int(calib_w), int(calib_h)), (int(img_w), int(img_h))
+    if min(calib + image) <= 0:
+        raise ValueError(f'image sizes must be positive: calibration {calib_w}x{calib_h}, '
+                         f'image {img_w}x{img_h}')
+    sizes = f'image {image[0]}x{image[1]} vs calibration {calib[0]}x{calib[1]}'
+    if image == calib:
+        return ImageFit('same', calib, image, note=f'{sizes}: same size')
+    if tolerance_px < 0:
+        return ImageFit('mismatch', calib, image, note=f'{sizes}: sizes must match exactly '
+                        f'(negative tolerance)')
+    dw, dh = image[0] - calib[0], image[1] - calib[1]
+    if abs(dw) <= tolerance_px and abs(dh) <= tolerance_px:
+        return ImageFit('cropped', calib, image, note=(
+            f'{sizes}: taken as {_edges(dw, dh)} by the codec, keypoints unchanged (assumes '
+            f'image and calibration share their origin: crop/padding at the right/bottom; a '
+            f'crop at the left/top would offset the keypoints by that many pixels)'))
+    if _same_aspect(*calib, *image):
+        scale = (calib[0] / image[0], calib[1] / image[1])
+        return ImageFit('scaled', calib, image, scale, note=(
+            f'{sizes}: taken as a resize of the calibrated image (same aspect ratio), '
+            f'keypoints scaled by {scale[0]:.6g} x {scale[1]:.6g} about pixel centres (assumes '
+            f'the whole calibrated view was resized, not cropped)'))
+    return ImageFit('mismatch', calib, image, note=(
+        f'{sizes}: neither a resize (aspect ratio {image[0] / image[1]:.4f} vs '
+        f'{calib[0] / calib[1]:.4f}) nor a crop or padding of at most {tolerance_px} px per '
+        f'dimension (rotated or wrong camera?)'))
+
+
+def _edges(dw: int, dh: int) -> str:
+    """Name what a size difference of (dw, dh) image minus calibration pixels would be."""
+    parts = []
+    for d, side in ((dw, 'columns'), (dh, 'rows')):
+        if d:
+            parts.append(f'{abs(d)} {side} {"padded" if d > 0 else "cropped"}')
+    return ' and '.join(parts)

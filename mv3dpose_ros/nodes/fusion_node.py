@@ -41,7 +41,8 @@ from typing import Any, Dict, List, Optional, Union
 from geometry_msgs.msg import PoseArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
-from mv3dpose_ros.core.camera import CalibrationError, Camera
+from mv3dpose_ros.core.camera import (CalibrationError, Camera, fit_image_size,
+                                      IMAGE_SIZE_TOLERANCE_PX)
 from mv3dpose_ros.core.fusion import Fusion, FusionConfig
 from mv3dpose_ros.core.output import LiveOutput
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout, LAYOUT_NAMES
@@ -266,6 +267,13 @@ class FusionNode(Node):
         d(self, 'input_depth', 100, 'QoS history depth of each input subscription (absorbs '
           'CPU hiccups: ~1.7 s at 60 fps; what overflows shows as stamp gaps)',
           read_only=True)
+        d(self, 'input_image_size_tolerance_px', IMAGE_SIZE_TOLERANCE_PX, 'Inputs whose '
+          'image_width x image_height differs from the calibration are used when it is a '
+          'resize (same aspect ratio: keypoints scaled into the calibration pixels) or a crop '
+          'or padding of at most this many pixels per dimension (keypoints unchanged: assumed at '
+          'the right/bottom, as codecs do); each is logged once per camera and size. Other '
+          'sizes are dropped (image_size). Negative: only the calibrated size is accepted',
+          read_only=True)
         d(self, 'layout', 'coco17', 'Skeleton layout fused and published '
           f'({", ".join(LAYOUT_NAMES)}); inputs of another known layout are converted',
           read_only=True)
@@ -350,6 +358,8 @@ class FusionNode(Node):
             raise ConfigError(f'input_topic {self.input_topic!r} must contain {{camera}}')
         self.input_reliability = v('input_reliability')
         self.input_depth = int(v('input_depth'))
+        self.image_size_tolerance_px = int(v('input_image_size_tolerance_px'))
+        self._image_size_logged: set = set()    # (camera, image and calibration sizes) logged
         try:
             sensor_qos(self.input_reliability, self.input_depth)
         except ValueError as exc:
@@ -473,7 +483,8 @@ class FusionNode(Node):
             if (camera.width, camera.height) != (rig_cam.width, rig_cam.height):
                 self.get_logger().warning(
                     f'camera {cam}: CameraInfo size {camera.width}x{camera.height} differs '
-                    f'from the rig file ({rig_cam.width}x{rig_cam.height}); using CameraInfo')
+                    f'from the rig file ({rig_cam.width}x{rig_cam.height}); using CameraInfo '
+                    f'(its intrinsics, and its size to check the inputs against)')
             self.rig[cam] = camera
             state.camera_info_received = True
             state.info_problem = ''
@@ -512,13 +523,28 @@ class FusionNode(Node):
                           f'{(stamp_ns - now_ns) / NS_PER_S:.3f} s ahead of the node clock '
                           f'(limit input_max_future_s)')
         calib = self.rig[cam]
+        fit = None
         if msg.image_width and msg.image_height and (
                 msg.image_width != calib.width or msg.image_height != calib.height):
-            problem = (f'image_width x image_height {msg.image_width}x{msg.image_height} '
-                       f'differs from the calibration {calib.width}x{calib.height} '
-                       f'({self.rig_path})')
-            state.size_problem = problem
-            return None, ('image_size', problem)
+            # A codec's crop/padding or a resized stream is mapped into the calibration's
+            # pixels (core.camera.fit_image_size); only what cannot be explained is dropped.
+            fit = fit_image_size(calib.width, calib.height, msg.image_width, msg.image_height,
+                                 self.image_size_tolerance_px)
+            source = 'CameraInfo' if state.camera_info_received else self.rig_path
+            if not fit.accepted:
+                problem = (f'image_width x image_height differs from the calibration '
+                           f'({source}): {fit.note}; parameter input_image_size_tolerance_px '
+                           f'({self.image_size_tolerance_px}) sets the crop or padding '
+                           f'accepted')
+                state.size_problem = problem
+                return None, ('image_size', problem)
+            key = (cam, fit.image_size, fit.calib_size)
+            if key not in self._image_size_logged:
+                self._image_size_logged.add(key)
+                self.get_logger().warning(
+                    f'camera {cam} on {state.topic}: {fit.note} ({fit.kind}; calibration from '
+                    f'{source}; parameter input_image_size_tolerance_px '
+                    f'{self.image_size_tolerance_px}); logged once per size')
         state.size_problem = ''
         persons = len(msg.counts) if isinstance(msg, Persons2D) else len(msg.persons)
         if persons > self.max_persons:
@@ -534,6 +560,8 @@ class FusionNode(Node):
             poses = person2d_array_to_numpy(msg, src.num_joints)
         except InvalidMessage as exc:
             return None, (exc.reason, str(exc))
+        if fit is not None:
+            poses = fit.apply(poses)
         if src.name != self.layout.name and len(poses):
             poses = convert_poses(poses, src, self.layout)
             bad = ~np.isfinite(poses).all(axis=-1)
