@@ -17,7 +17,11 @@
 ``mv3dpose eval``: score a tracks JSON Lines file against ground truth.
 
 Prints PCP3D (10 parts and 8 limbs, per actor, alpha 0.5, the VoxelPose protocol), MPJPE with
-Hungarian matching, and CLEAR MOT (MOTA, MOTP, IDF1, ID switches). Ground-truth formats:
+Hungarian matching, CLEAR MOT (MOTA, MOTP, ID switches and per minute, fragmentations), IDF1
+with IDP and IDR, the share of ground-truth person-frames with two hypotheses on them
+(duplicates), and the identity figures a live run gets without ground truth
+(``eval.identity.identity_summary``: distinct ids, share of the N most frequent, returns, late
+ids, over-count, duplicates), all also in the ``--json`` file. Ground-truth formats:
 ``campus`` (Campus/Shelf ``actorsGT.mat``, default frames the Campus test frames 350-470 and
 650-750), ``shelf`` (same file format, all annotated frames), ``panoptic`` (a folder of
 Panoptic ``body3DScene_*.json``) and ``tracks`` (ground truth in the tracks JSON Lines schema,
@@ -27,8 +31,9 @@ e.g. from ``mv3dpose_ros.sim.export``). Frame numbers of both files must agree, 
 
 import argparse
 import json
+import math
 import sys
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 
 def parse_frames(text: str) -> List[int]:
@@ -80,6 +85,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--alpha', type=float, default=0.5, help='PCP alpha (default 0.5)')
     parser.add_argument('--pcp-matching', choices=('nearest', 'hungarian'), default='nearest',
                         help='PCP: nearest prediction per actor (VoxelPose) or one-to-one')
+    parser.add_argument('--fps', type=float, metavar='HZ',
+                        help='frame rate: tracks frame n is at n / fps s, for ID switches per '
+                             'minute and the identity warm-up (default: the stamps of the '
+                             'tracks lines)')
+    parser.add_argument('--duplicate-radius-m', type=float, default=0.3, metavar='M',
+                        help='identity without GT: two confirmed skeletons closer than this '
+                             '(mean joint distance) are one person twice (default 0.3)')
     parser.add_argument('--json', metavar='FILE', help='also write the figures as JSON')
 
 
@@ -102,19 +114,22 @@ def run(args) -> int:
     from mv3dpose_ros.io.datasets import DatasetError
 
     issues: List[str] = []
+    stamps: Dict[int, float] = {}
     try:
         states = _states(args.states)
-        if not args.threshold_m > 0 or not args.alpha > 0:
-            raise ValueError('--threshold-m and --alpha must be positive')
+        if not args.threshold_m > 0 or not args.alpha > 0 or not args.duplicate_radius_m > 0:
+            raise ValueError('--threshold-m, --alpha and --duplicate-radius-m must be positive')
+        if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
+            raise ValueError(f'--fps must be positive, got {args.fps}')
         gt = load_ground_truth(args.gt, args.format)
-        layout, hyps = read_hypotheses(args.tracks, states, issues)
+        layout, hyps = read_hypotheses(args.tracks, states, issues, stamps)
         if layout is None:
             if not hyps:
                 raise ValueError(f'{args.tracks}: no usable lines')
             raise ValueError(f'{args.tracks}: the lines carry no "layout"')
         report = evaluate_run(layout, hyps, gt, args.frames, args.frame_offset,
                               args.threshold_m, args.mot_distance, args.alpha,
-                              args.pcp_matching)
+                              args.pcp_matching, stamps, args.fps, args.duplicate_radius_m)
     except (OSError, ValueError, DatasetError, CalibrationError) as e:
         print(f'mv3dpose eval: {e}', file=sys.stderr)
         return 2

@@ -13,9 +13,11 @@
 # limitations under the License.
 
 """
-Evaluation metrics: PCP3D (10-part and 8-limb), MPJPE, CLEAR MOT / IDF1.
+Evaluation metrics: PCP3D (10-part and 8-limb), MPJPE, CLEAR MOT / IDF1, identity figures.
 
-Modules: :mod:`.pcp`, :mod:`.mpjpe`, :mod:`.mot` (per-frame building blocks) and
+Modules: :mod:`.pcp`, :mod:`.mpjpe`, :mod:`.mot` (per-frame building blocks; with ground
+truth: MOTA, IDF1/IDP/IDR, ID switches per minute, fragmentations, duplicates), :mod:`.identity`
+(without ground truth, for live runs: ``duplicate_rate``, ``identity_summary``) and
 :mod:`.sequence` (a whole tracks file against Campus/Shelf, Panoptic or JSON Lines ground
 truth, as ``mv3dpose eval`` prints it). All distances are metres; missing joints are NaN.
 """

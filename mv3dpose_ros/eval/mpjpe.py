@@ -22,7 +22,7 @@ Euclidean distance over the joints valid in both; pairs without a shared joint a
 """
 
 from dataclasses import dataclass, field
-from typing import Iterable, Optional, Tuple
+from typing import Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -46,6 +46,23 @@ def pose_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     total = np.where(valid, d, 0.0).sum(-1)
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(count > 0, total / np.maximum(count, 1), np.inf)
+
+
+def pose_roots(poses: np.ndarray, root_joints: Optional[Sequence[int]] = None) -> np.ndarray:
+    """
+    Return ``[N, 3]`` root points of ``[N, J, 3]`` poses, NaN where a root is undefined.
+
+    The root is the mean of ``root_joints`` (all of them must be valid, e.g. both hips, so a
+    root never jumps to one hip), or without them the centroid of the valid joints.
+    """
+    poses = np.asarray(poses, dtype=float)
+    sel = poses[:, list(root_joints)] if root_joints else poses
+    valid = np.isfinite(sel).all(-1)
+    count = valid.sum(-1)
+    total = np.where(valid[..., None], sel, 0.0).sum(-2)
+    if root_joints:
+        return np.where((count == len(root_joints))[:, None], total / len(root_joints), np.nan)
+    return np.where((count > 0)[:, None], total / np.maximum(count, 1)[:, None], np.nan)
 
 
 def match_poses(pred: np.ndarray, gt: np.ndarray,

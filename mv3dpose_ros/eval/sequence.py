@@ -14,7 +14,7 @@
 
 
 """
-Score a whole tracking run against ground truth: PCP, MPJPE and CLEAR MOT in one pass.
+Score a whole tracking run against ground truth: PCP, MPJPE, CLEAR MOT and identity in one pass.
 
 Ground truth comes from Campus/Shelf ``actorsGT.mat`` (``shelf14``), a Panoptic
 ``hdPose3d_stage1_coco19`` folder (``panoptic19``) or a tracks JSON Lines file (any layout,
@@ -23,14 +23,21 @@ them. For MPJPE and MOT, predictions are mapped to the ground-truth layout by jo
 only joints both layouts have count (no derived joints); for PCP both sides are converted to
 ``shelf14`` with ``core.skeleton.convert_poses``, which derives the head joints a layout lacks
 (as VoxelPose does for COCO output).
+
+Identity figures come in two kinds: against the ground truth (IDF1/IDP/IDR, ID switches per
+minute, fragmentations, duplicates near a person: :mod:`.mot`) and from the hypotheses alone
+(:func:`.identity.identity_summary` with the number of ground-truth people, the figures a live
+run without annotation can be given, here computed on the same frames so both can be
+compared). Per-minute figures need the stamps of the tracks lines or a frame rate.
 """
 
 from dataclasses import dataclass, field
 import os
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout
 from mv3dpose_ros.core.types import TrackState
+from mv3dpose_ros.eval.identity import identity_summary, IdentitySummary
 from mv3dpose_ros.eval.mot import MOTEvaluator, MOTResult
 from mv3dpose_ros.eval.mpjpe import mpjpe, MPJPEResult
 from mv3dpose_ros.eval.pcp import evaluate_pcp, PCPResult
@@ -102,12 +109,15 @@ def load_ground_truth(path: str, fmt: str) -> GroundTruth:
 
 
 def read_hypotheses(path: str, states: Optional[Iterable[TrackState]] = (TrackState.CONFIRMED,),
-                    issues: Optional[List[str]] = None) -> Tuple[Optional[str], PoseFrames]:
+                    issues: Optional[List[str]] = None,
+                    stamps: Optional[Dict[int, float]] = None
+                    ) -> Tuple[Optional[str], PoseFrames]:
     """
     Read a tracks JSON Lines file: ``(layout, frame -> (ids, poses))``, keeping ``states``.
 
     ``states=None`` keeps every state except DELETED tombstones. Lines of another layout
-    than the first are reported and skipped.
+    than the first are reported and skipped. A ``stamps`` dict is filled with the stamps
+    (s) of the lines that carry one, by frame (for the per-minute figures).
     """
     from mv3dpose_ros.io.tracks_jsonl import read_tracks
 
@@ -135,6 +145,8 @@ def read_hypotheses(path: str, states: Optional[Iterable[TrackState]] = (TrackSt
         ids = np.array([t.id for t in tracks], dtype=int)
         poses = np.array([t.joints for t in tracks]).reshape(len(tracks), n_j, 3)
         frames[fr.frame] = (ids, poses)
+        if stamps is not None and fr.stamp is not None:
+            stamps[fr.frame] = float(fr.stamp)
     return layout, frames
 
 
@@ -148,6 +160,7 @@ class EvalReport:
     mpjpe: MPJPEResult
     mot: MOTResult
     notes: List[str] = field(default_factory=list)
+    identity: Optional[IdentitySummary] = None      # from the hypotheses alone
 
     def as_dict(self) -> dict:
         """Return the headline figures as a JSON-friendly dict."""
@@ -155,7 +168,8 @@ class EvalReport:
             return None if x is None or not np.isfinite(x) else float(x)
 
         out = {'frames': self.frames, 'mpjpe_m': f(self.mpjpe.mpjpe_m),
-               'mpjpe_recall': f(self.mpjpe.recall), 'mot': self.mot.as_dict()}
+               'mpjpe_recall': f(self.mpjpe.recall), 'mot': self.mot.as_dict(),
+               'identity': None if self.identity is None else self.identity.as_dict()}
         for name, p in (('pcp', self.pcp), ('pcp8', self.pcp8)):
             if p is not None:
                 out[name] = {'average': f(p.average),
@@ -178,6 +192,8 @@ class EvalReport:
                      f'(recall {100 * m.recall:.1f} % of {m.total_gt}, '
                      f'{m.false_positives} unmatched predictions)')
         lines.append(self.mot.summary())
+        if self.identity is not None:
+            lines.append(self.identity.summary())
         lines += [f'note: {n}' for n in self.notes]
         return '\n'.join(lines)
 
@@ -205,12 +221,18 @@ def _to(poses: np.ndarray, src: str, dst: str, derive: bool = True) -> np.ndarra
 def evaluate_run(hyp_layout: str, hyps: PoseFrames, gt: GroundTruth,
                  frames: Optional[Sequence[int]] = None, frame_offset: int = 0,
                  threshold_m: float = 0.5, mot_distance: str = 'mean_joint',
-                 alpha: float = 0.5, pcp_matching: str = 'nearest') -> EvalReport:
+                 alpha: float = 0.5, pcp_matching: str = 'nearest',
+                 stamps: Optional[Mapping[int, float]] = None, fps: Optional[float] = None,
+                 duplicate_radius_m: float = 0.3) -> EvalReport:
     """
     Score hypotheses against ground truth over ``frames``.
 
     ``frames`` defaults to the dataset's evaluation frames, else every ground-truth frame.
     The hypotheses of GT frame ``f`` are those of tracks frame ``f + frame_offset``.
+    ``stamps`` (tracks frame -> s, see :func:`read_hypotheses`) or ``fps`` (tracks frame
+    ``n`` at ``n / fps`` s, which wins) time the frames for the per-minute figures and the
+    warm-up of the identity summary; without either the summary is left out, with a note.
+    ``duplicate_radius_m`` is the identity summary's duplicate distance.
     """
     if frames is None:
         frames = gt.default_frames if gt.default_frames is not None else sorted(gt.frames)
@@ -219,14 +241,20 @@ def evaluate_run(hyp_layout: str, hyps: PoseFrames, gt: GroundTruth,
     glay = get_layout(gt.layout)
     hlay = get_layout(hyp_layout)
     root = glay.root_joints if mot_distance == 'root' else None
-    mot = MOTEvaluator(threshold_m, mot_distance, root)
+    mot = MOTEvaluator(threshold_m, mot_distance, root, fps)
+    stamps = {} if stamps is None else stamps
+    messages = []
     mp_pairs, pcp_frames = [], []
     empty = np.zeros((0, hlay.num_joints, 3))
     for f in frames:
         gid, gpose = gt.frames[f]
         hid, hpose = hyps.get(f + frame_offset, (np.zeros(0, dtype=int), empty))
         h_in_g = _to(hpose, hlay.name, glay.name, derive=False)
-        mot.update(gid, gpose, hid, h_in_g)
+        hf = f + frame_offset
+        stamp = hf / fps if fps else stamps.get(hf)
+        mot.update(gid, gpose, hid, h_in_g, stamp)
+        if hf in hyps:
+            messages.append((stamp, list(zip(hid, hpose))))
         mp_pairs.append((h_in_g, gpose))
         pcp_frames.append((_to(hpose, hlay.name, 'shelf14'),
                            {int(i): p for i, p in zip(gid, _to(gpose, glay.name, 'shelf14'))}))
@@ -240,6 +268,12 @@ def evaluate_run(hyp_layout: str, hyps: PoseFrames, gt: GroundTruth,
     if glay.name != 'shelf14':
         notes.append(f'PCP: ground truth converted from {glay.name} to shelf14 (head joints '
                      f'derived as in core.skeleton)')
+    identity = None
+    if any(s is None for s, _ in messages):
+        notes.append('identity without GT left out: the tracks lines carry no stamp (give a '
+                     'frame rate); ID switches per minute likewise')
+    else:
+        identity = identity_summary(messages, len(actor_ids), radius_m=duplicate_radius_m)
     return EvalReport(frames=len(frames), pcp=pcp, pcp8=pcp8,
                       mpjpe=mpjpe(mp_pairs, True, threshold_m, glay.num_joints),
-                      mot=mot.result(), notes=notes)
+                      mot=mot.result(), notes=notes, identity=identity)
