@@ -42,6 +42,7 @@ Units: thresholds on image distances are in normalised image units (pixels / foc
 0.045 = 45 px at f = 1000 px), 3D distances in metres, times in seconds (field names say so).
 """
 
+from collections import Counter
 from dataclasses import asdict, dataclass
 import functools
 from itertools import accumulate, compress
@@ -49,14 +50,14 @@ import logging
 from typing import Dict, List, Mapping, Optional, Set, Tuple
 
 from mv3dpose_ros.core.association import (associate_stacked, camera_order,
-                                           epipolar_norm_coefficients)
+                                           epipolar_norm_coefficients, gated_assignment)
 from mv3dpose_ros.core.camera import Camera, essential_matrices
 from mv3dpose_ros.core.skeleton import get_layout, Layout
 from mv3dpose_ros.core.tracking import centroid, pose_distance, Tracker, TrackerConfig, Tracks
 from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, dlt_basis,
                                              swap_pairs, swapped_views, triangulate_robust,
                                              Triangulation)
-from mv3dpose_ros.core.types import JointState, Track, TrackState
+from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 import numpy as np
 
 _LOG = logging.getLogger(__name__)
@@ -68,6 +69,13 @@ _MIN_VARIANCE = 0.005 ** 2
 _MISSING, _PREDICTED = int(JointState.MISSING), int(JointState.PREDICTED)
 _TRIANGULATED = np.uint8(JointState.TRIANGULATED)
 _TRACK_STATES = {int(s): s for s in TrackState}
+_SOURCES = {int(s): s for s in PositionSource}
+_TENTATIVE_TRACK = np.int8(TrackState.TENTATIVE)
+_COASTING_TRACK = np.int8(TrackState.COASTING)
+# Frames two tracks must look like one person (close, no shared camera) before they merge.
+_DUPLICATE_FRAMES = 3
+# Extra per-axis variance of a root taken from the body instead of the hips [m^2]: (15 cm)^2.
+_BODY_ROOT_VARIANCE = 0.15 ** 2
 
 
 @dataclass
@@ -116,6 +124,14 @@ class FusionConfig:
     innovation_gate_chi2: float = 16.3      # reject an observation beyond this (3 dof, 99.9 %)
     reinit_after: int = 2                   # consecutive rejections before a joint restarts
     max_gap_s: float = 0.3                  # joints are held for at most this long
+    # every observation counts: single views update the tracks they belong to
+    view_updates: bool = True               # 2D keypoints no >= 2-view triangulation used
+    #                                         update existing tracks as rays (False: only
+    #                                         joints triangulated in one set do, the paper's)
+    view_min_joints: int = 3                # joints a view must update to observe a track
+    tentative_coast_s: float = 0.25         # a TENTATIVE track outlives sets without it this
+    #                                         long (sparse views: not every set sees a birth)
+    view_gate_chi2: float = 13.8            # ray innovation gate (chi-square, 2 dof, 99.9 %)
 
     def validate(self) -> None:
         """Raise ValueError naming the first out-of-range field."""
@@ -124,10 +140,11 @@ class FusionConfig:
         non_negative = ('min_joint_confidence', 'swap_ratio', 'merge_distance_m',
                         'min_birth_view_ratio', 'tracking_gate_growth_mps',
                         'tracking_recovery_gate_m', 'max_coast_s', 'max_gap_s',
-                        'confirm_at_birth_ratio', 'publish_coast_s', 'noise_gain')
+                        'confirm_at_birth_ratio', 'publish_coast_s', 'noise_gain',
+                        'tentative_coast_s')
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
                         'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
-                        'min_birth_cameras_in_view', 'reinit_after')
+                        'min_birth_cameras_in_view', 'reinit_after', 'view_min_joints')
         for name, value in asdict(self).items():
             if isinstance(value, bool) or name == 'smoothing':
                 continue
@@ -195,7 +212,7 @@ class Fusion:
             confirm_hits=cfg.confirm_hits, max_coast_s=cfg.max_coast_s,
             min_birth_joints=cfg.min_birth_joints, accel_noise=cfg.accel_noise,
             gate_chi2=cfg.innovation_gate_chi2, reinit_after=cfg.reinit_after,
-            max_gap_s=cfg.max_gap_s))
+            max_gap_s=cfg.max_gap_s, tentative_coast_s=cfg.tentative_coast_s))
         self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
         self._strong_views = min(3, num_c)
         self._noise_views = min(3, num_c)         # 2-view residuals say little about noise
@@ -212,12 +229,22 @@ class Fusion:
         self.last_members = np.zeros((0, len(self.cameras)), dtype=int)
         self._info: Dict[str, float] = {}
         self._info_tri: Optional[Triangulation] = None
+        self._x, self._offsets = np.full((1, num_j, 3), np.nan), (0,) * (num_c + 1)
+        self._centres = np.array([c.center for c in self.cameras])
+        self._rotations = np.array([c.R for c in self.cameras])
+        self._flip = self.layout.flip_permutation
+        self._duplicates: Dict[Tuple[int, int], int] = {}   # id pair -> frames alike
+        #: Counters since construction: tracks updated by single views in a step
+        #: ('view_updates'), late views used ('late_views_used'), tracks found again after
+        #: they stopped being published ('recovered'), duplicates merged ('merged_tracks').
+        self.counts: Counter = Counter()
 
     # ------------------------------------------------------------------ public API
     def reset(self) -> List[Track]:
         """Clear all tracks and filters; return their DELETED tombstones (ids keep counting)."""
         dropped = self._tombstones(self.tracker.reset())
         self._confidence = np.zeros((0, self.layout.num_joints))
+        self._duplicates.clear()
         self._last_stamp = None
         return dropped
 
@@ -235,6 +262,7 @@ class Fusion:
         ``stamp_ns`` is the same stamp in integer nanoseconds (default: ``stamp`` rounded); the
         tracks' ``first_seen_ns`` / ``last_observed_ns`` are copies of it, exactly.
         """
+        cfg = self.config
         stamp = float(stamp)
         stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
         tombs: List[Track] = []
@@ -260,9 +288,246 @@ class Fusion:
 
         self._estimate_noise(tri)
         variance = self.measurement_variance(tri)
+        merged = self._merge_duplicates()
+        tr = self.tracker.tracks
+        lost = tr.ids[stamp - tr.last_observed > cfg.publish_coast_s + 1e-9]
         upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns)
-        return self._outputs(upd, tri, members, variance, stamp) + tombs \
-            + self._tombstones(upd.deleted)
+        rays = None
+        if cfg.view_updates and len(self.tracker.tracks):
+            rays = self._update_from_views(upd, members, stamp, stamp_ns)
+        tr = self.tracker.tracks
+        if len(lost):
+            back = tr.ids[tr.last_observed == stamp]
+            self.counts['recovered'] += int(np.isin(back, lost).sum())
+        out = self._outputs(upd, tri, members, variance, stamp, rays)
+        self._count_duplicates(rays, upd, members)
+        return out + tombs + self._tombstones(merged) + self._tombstones(upd.deleted)
+
+    def update_view(self, camera: str, poses: np.ndarray, stamp: float,
+                    stamp_ns: Optional[int] = None) -> int:
+        """
+        Update the tracks with one camera's 2D poses taken at ``stamp`` (a late message).
+
+        For views that missed their synchronised set: each pose is associated with the
+        CONFIRMED or COASTING track it projects onto (at ``stamp``, which may be older than
+        the last step) and its keypoints update that track's joint filters as rays. Nothing
+        is born and nothing is output; the next ``step`` reports the tracks. Returns the
+        number of tracks updated (0 with ``view_updates`` off, for an unknown camera or a
+        stamp older than the tracks can use).
+        """
+        stamp = float(stamp)
+        stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
+        tr = self.tracker.tracks
+        if not self.config.view_updates or not len(tr) or camera not in self._index:
+            if camera not in self._index:
+                self._warn('cam:' + str(camera), f'view of unknown camera {camera!r} ignored '
+                           f'(rig cameras: {", ".join(self.camera_names)})')
+            return 0
+        if self._last_stamp is not None and stamp < self._last_stamp - self.config.max_coast_s:
+            return 0                     # older than anything the tracks still hold
+        x, _, offsets, _ = self._prepare({camera: poses})
+        c = self._index[camera]
+        lo, hi = offsets[c], offsets[c + 1]
+        cand = np.nonzero(tr.state != _TENTATIVE_TRACK)[0]
+        if hi == lo or not len(cand):
+            return 0
+        rows, cols, flip = self._match_view(c, cand, x[lo:hi], stamp)
+        if not len(rows):
+            return 0
+        pts = x[lo:hi].take(cols, axis=0)
+        if flip.any():
+            pts[flip] = pts[flip][:, self.layout.flip_permutation]
+        res = self._ray_update(c, cand[rows], pts, stamp)
+        observed = cand[rows][res.accepted.sum(axis=1) >= self.config.view_min_joints]
+        self.tracker.observe_views(observed, stamp, stamp_ns)
+        self.tracker.refresh(cand[rows])
+        self.counts['late_views_used'] += 1
+        return len(observed)
+
+    # ------------------------------------------------------------------ single views
+    def _update_from_views(self, upd, members: np.ndarray, stamp: float,
+                           stamp_ns: int) -> Optional['_Rays']:
+        """
+        Update the tracks with the 2D poses that no triangulation used (``view_updates``).
+
+        A member view of a track's 3D pose updates the joints that were not triangulated; a
+        pose left over in a camera (seen by one camera, or not associated across views) is
+        matched to a CONFIRMED or COASTING track that has no pose of that camera and updates
+        all its joints. A track no 3D pose matched is observed when ``view_min_joints`` of
+        its joints took a view.
+        """
+        cfg, tr = self.config, self.tracker.tracks
+        x, offsets = self._x, self._offsets
+        num_n, num_t = offsets[-1], len(tr)
+        if not num_n:
+            return None
+        det = upd.detection
+        assigned = np.full((num_t, len(self.cameras)), -1)
+        has = det >= 0
+        if has.any():
+            assigned[has] = members[det[has]]
+        from_member = assigned >= 0
+        used = np.zeros(num_n + 1, dtype=bool)
+        used[assigned[from_member]] = True
+        eligible = tr.state != _TENTATIVE_TRACK      # a single view confirms no new track
+        flipped = np.zeros((num_t, len(self.cameras)), dtype=bool)
+        for c, (lo, hi) in enumerate(zip(offsets, offsets[1:])):
+            if hi == lo:
+                continue
+            free = lo + np.nonzero(~used[lo:hi])[0]
+            cand = np.nonzero(eligible & (assigned[:, c] < 0))[0]
+            if len(free) and len(cand):
+                rows, cols, flip = self._match_view(c, cand, x.take(free, axis=0), stamp)
+                assigned[cand[rows], c] = free[cols]
+                flipped[cand[rows], c] = flip
+        if not (assigned >= 0).any():
+            return None
+        num_j = self.layout.num_joints
+        rays = _Rays(accepted=np.zeros((num_t, num_j), dtype=bool),
+                     point=np.full((num_t, num_j, 3), np.nan),
+                     variance=np.full((num_t, num_j), np.nan),
+                     views=np.zeros((num_t, num_j), dtype=np.int64),
+                     cameras=assigned >= 0)
+        triangulated = upd.filtered.accepted
+        seen = np.isfinite(x.take(np.where(from_member, assigned, -1), axis=0)[..., 0]
+                           ).sum(axis=1)                        # [T, J] member views seeing
+        for c in range(len(self.cameras)):
+            rows = np.nonzero(assigned[:, c] >= 0)[0]
+            if not len(rows):
+                continue
+            pts = x.take(assigned[rows, c], axis=0)
+            flip = flipped[rows, c]
+            if flip.any():
+                pts[flip] = pts[flip][:, self._flip]
+            # a member view's joint counts only where no other view of the 3D pose saw it:
+            # triangulated, it is in the 3D measurement already; seen by several views and
+            # not triangulated, the views disagreed (the reprojection gate or bone check)
+            skip = from_member[rows, c][:, None] & (triangulated[rows] | (seen[rows] > 1))
+            if skip.any():
+                pts = np.where(skip[..., None], np.nan, pts)
+            res = self._ray_update(c, rows, pts, stamp)
+            acc = res.accepted
+            rays.views[rows] += acc
+            first = acc & ~rays.accepted[rows]
+            rays.point[rows] = np.where(first[..., None], res.point, rays.point[rows])
+            rays.variance[rows] = np.where(first, res.variance, rays.variance[rows])
+            rays.accepted[rows] |= acc
+        updated = np.nonzero(rays.accepted.any(axis=1))[0]
+        if not len(updated):
+            return rays
+        enough = rays.accepted.sum(axis=1) >= cfg.view_min_joints
+        self.tracker.observe_views(np.nonzero(enough & ~has)[0], stamp, stamp_ns)
+        self.tracker.refresh(updated)
+        self.counts['view_updates'] += len(updated)
+        kal, filt = upd.filtered, self.tracker.filter
+        acc = rays.accepted
+        kal.joints[acc] = filt.x[acc]
+        kal.state[acc] = _TRIANGULATED
+        kal.variance[acc] = filt.p_xx[acc]
+        kal.accepted = kal.accepted | acc
+        return rays
+
+    def _match_view(self, cam: int, tracks: np.ndarray, poses: np.ndarray, stamp: float
+                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Match normalised 2D poses ``[P, J, 3]`` of camera ``cam`` to tracks ``[N]`` (rows).
+
+        The cost is the mean image distance (normalised units) between the track's predicted
+        joints projected into the camera and the pose's, over at least ``min_shared_joints``
+        joints; a mirrored pose (left/right swapped by the detector) is taken when it fits
+        ``swap_ratio`` times better. The gate is the 3D tracking gate (grown with the time
+        the track was not seen) at the track's depth, plus 3 sigma of 2D noise. Returns
+        ``(rows into tracks, rows into poses, mirrored)``.
+        """
+        cfg, tr = self.config, self.tracker.tracks
+        pred = tr.predicted(stamp, cfg.tracking_prediction,
+                            self.tracker.config.max_predict_s)[tracks]          # [N, J, 3]
+        R, centre = self._rotations[cam], self._centres[cam]
+        local = (pred - centre) @ R.T                                           # [N, J, 3]
+        z = local[..., 2]
+        with np.errstate(invalid='ignore', divide='ignore'):
+            front = z > 0.05
+            proj = np.where(front[..., None], local[..., :2] / z[..., None], np.nan)
+            cost = _image_cost(proj, poses[..., :2], cfg.min_shared_joints)     # [N, P]
+            flip = np.zeros(cost.shape, dtype=bool)
+            if cfg.swap_check and len(self._flip_pairs):
+                mirrored = _image_cost(proj, poses[:, self._flip, :2], cfg.min_shared_joints)
+                flip = mirrored < cfg.swap_ratio * cost
+                cost = np.where(flip, mirrored, cost)
+            depth = np.nanmedian(np.where(front, z, np.nan), axis=1)
+        unseen = np.maximum(stamp - tr.last_observed[tracks], 0.0)
+        gate_m = cfg.tracking_gate_m + cfg.tracking_gate_growth_mps * unseen
+        gate = np.where(np.isfinite(depth), gate_m / np.where(np.isfinite(depth), depth, 1.0)
+                        + 3 * self.noise_norm, -1.0)
+        rows, cols = gated_assignment(cost, gate[:, None])
+        return rows, cols, flip[rows, cols]
+
+    def _ray_update(self, cam: int, rows: np.ndarray, points: np.ndarray, stamp: float):
+        """Fold normalised 2D keypoints ``[N, J, 3]`` of camera ``cam`` into tracks ``rows``."""
+        direction = points @ self._rotations[cam]                  # R^T p: world directions
+        with np.errstate(invalid='ignore'):
+            direction = direction / np.sqrt((direction * direction).sum(axis=-1))[..., None]
+        return self.tracker.filter.update_rays(rows, self._centres[cam], direction,
+                                               self.noise_norm, stamp,
+                                               self.config.view_gate_chi2, _MIN_VARIANCE)
+
+    # ------------------------------------------------------------------ duplicates
+    def _count_duplicates(self, rays: Optional['_Rays'], upd, members: np.ndarray) -> None:
+        """
+        Count, per pair of published tracks, the consecutive steps they look like one person.
+
+        Alike: mean joint distance below ``merge_distance_m`` and no camera seeing both in
+        this step (one person tracked twice from disjoint views; two people side by side are
+        seen by the same cameras). ``_merge_duplicates`` acts on the count next step.
+        """
+        cfg, tr = self.config, self.tracker.tracks
+        live = np.nonzero(tr.state != _TENTATIVE_TRACK)[0]
+        if len(live) < 2 or cfg.merge_distance_m <= 0:
+            self._duplicates.clear()
+            return
+        dist = pose_distance(tr.pose[live], tr.pose[live], cfg.min_shared_joints)
+        close = (dist < cfg.merge_distance_m) & _upper_triangle(len(live))
+        if not close.any():
+            self._duplicates.clear()
+            return
+        cams = np.zeros((len(tr), len(self.cameras)), dtype=bool)
+        det = upd.detection
+        has = det >= 0
+        if has.any():
+            cams[has] = members[det[has]] >= 0
+        if rays is not None:
+            cams |= rays.cameras
+        ids = tr.ids.tolist()
+        alike = {}
+        for i, j in zip(*np.nonzero(close)):
+            a, b = live[i], live[j]
+            if not (cams[a] & cams[b]).any():
+                key = (ids[a], ids[b])
+                alike[key] = self._duplicates.get(key, 0) + 1
+        self._duplicates = alike
+
+    def _merge_duplicates(self) -> Tracks:
+        """Delete the younger of each pair alike for ``_DUPLICATE_FRAMES`` steps."""
+        if not self._duplicates:
+            return Tracks.empty(self.layout.num_joints)
+        tr = self.tracker.tracks
+        row = {tid: r for r, tid in enumerate(tr.ids.tolist())}
+        drop = set()
+        for (a, b), frames in sorted(self._duplicates.items()):
+            if frames >= _DUPLICATE_FRAMES and a in row and b in row \
+                    and a not in drop and b not in drop:
+                older = a if (tr.first_seen[row[a]], a) <= (tr.first_seen[row[b]], b) else b
+                drop.add(b if older == a else a)
+        self._duplicates = {k: n for k, n in self._duplicates.items() if not set(k) & drop}
+        if not drop:
+            return Tracks.empty(self.layout.num_joints)
+        rows = np.array(sorted(row[d] for d in drop))
+        keep = np.ones(len(tr), dtype=bool)
+        keep[rows] = False
+        self._confidence = self._confidence[keep] if len(self._confidence) == len(tr) \
+            else self._confidence
+        self.counts['merged_tracks'] += len(rows)
+        return self.tracker.remove(rows)
 
     @property
     def noise_norm(self) -> float:
@@ -424,6 +689,7 @@ class Fusion:
                 tri, members, swaps = self._triangulate(x, conf, members)
         info.update(swapped_pairs=swaps, merged=merged, poses_3d=len(members))
         self.last_members = np.where(members >= 0, source.take(members), -1)
+        self._x, self._offsets = x, offsets
         self._info, self._info_tri = info, tri
         return tri, members
 
@@ -504,7 +770,7 @@ class Fusion:
 
     # ------------------------------------------------------------------ output
     def _outputs(self, upd, tri: Triangulation, members: np.ndarray, variance: np.ndarray,
-                 stamp: float) -> List[Track]:
+                 stamp: float, rays: Optional['_Rays'] = None) -> List[Track]:
         """Build the Track of every live track (vectorised over tracks)."""
         cfg = self.config
         det, previous, kal = upd.detection, upd.previous, upd.filtered
@@ -528,6 +794,11 @@ class Fusion:
             r = np.where(accepted, r, np.nan)
             num_views = np.where(accepted, num_views, 0)
             err = np.where(accepted, err, np.nan)
+        if rays is not None:             # joints only single views updated: their rays
+            only = rays.accepted & ~np.isfinite(r)
+            z = np.where(only[..., None], rays.point, z)
+            r = np.where(only, rays.variance, r)
+            num_views = num_views + rays.views
         observed = accepted
         if observed.all():
             conf_last = conf_obs
@@ -547,6 +818,7 @@ class Fusion:
         confidence = np.where(missing, 0.0, np.where(state == _PREDICTED, 0.5, 1.0) * conf_last)
         velocity = tr.velocity
         cov = np.full((num_t, 3, 3), np.nan)
+        source = np.full(num_t, int(PositionSource.HIPS), dtype=np.uint8)
         if self._root is None:
             position = np.full((num_t, 3), np.nan)
         else:
@@ -554,6 +826,18 @@ class Fusion:
             left, right = self._root
             position = (joints[:, left] + joints[:, right]) / 2
             root_var = (joint_var[:, left] + joint_var[:, right]) / 4
+            no_hips = ~np.isfinite(position[:, 0])
+            if no_hips.any():            # never a silent origin: the body's centre instead
+                position, root_var = position.copy(), root_var.copy()
+                body = centroid(np.where(np.isfinite(joints[no_hips]), joints[no_hips],
+                                         tr.pose[no_hips]))
+                position[no_hips] = body
+                known = ~missing[no_hips] & np.isfinite(joint_var[no_hips])
+                spread = np.where(known, joint_var[no_hips], 0.0).sum(axis=1) \
+                    / np.maximum(known.sum(axis=1), 1)
+                root_var[no_hips] = spread + _BODY_ROOT_VARIANCE
+                source[no_hips] = np.where(np.isfinite(body[:, 0]), int(PositionSource.BODY),
+                                           int(PositionSource.NONE))
             cov = root_var[:, None, None] * np.eye(3)
             filt = self.tracker.filter
             v = filt.v
@@ -569,6 +853,12 @@ class Fusion:
         names = self.camera_names
         seen_by = (members >= 0).tolist()
         view_sets = [tuple(compress(names, seen_by[d])) if d >= 0 else () for d in det.tolist()]
+        if rays is not None and rays.cameras.any():
+            both = rays.cameras.copy()
+            has = det >= 0
+            both[has] |= members[det[has]] >= 0
+            view_sets = [tuple(compress(names, row)) for row in both.tolist()]
+        sources = source.tolist()
         ids, states, hits, missed = (tr.ids.tolist(), tr.state.tolist(), tr.hits.tolist(),
                                      tr.missed.tolist())
         first_seen, last_observed, score = (tr.first_seen.tolist(), tr.last_observed.tolist(),
@@ -581,7 +871,7 @@ class Fusion:
                      missed=missed[i], score=score[i], source_cameras=view_sets[i],
                      joint_variance=joint_var[i], position_covariance=cov[i],
                      measurement=z[i], measurement_variance=r[i], first_seen_ns=first_ns[i],
-                     last_observed_ns=last_ns[i])
+                     last_observed_ns=last_ns[i], position_source=_SOURCES[sources[i]])
                for i in range(num_t)]
         out.sort(key=lambda t: t.track_id)
         return out
@@ -606,6 +896,27 @@ class Fusion:
                              age=int(dead.hits[i]), missed=int(dead.missed[i]), score=0.0,
                              source_cameras=()))
         return out
+
+
+@dataclass
+class _Rays:
+    """Single-view updates of one step, per live track (see ``Fusion._update_from_views``)."""
+
+    accepted: np.ndarray    # [T, J] a view updated the joint
+    point: np.ndarray       # [T, J, 3] the first accepted ray's point nearest the prediction
+    variance: np.ndarray    # [T, J] its variance across the ray [m^2]
+    views: np.ndarray       # [T, J] views that updated the joint
+    cameras: np.ndarray     # [T, C] cameras whose pose went to the track as a single view
+
+
+def _image_cost(proj: np.ndarray, poses: np.ndarray, min_joints: int) -> np.ndarray:
+    """Return ``[N, P]`` mean distances of projected ``[N, J, 2]`` and detected ``[P, J, 2]``."""
+    d = proj[:, None] - poses[None]
+    dist = np.sqrt((d * d).sum(axis=-1))                              # [N, P, J], NaN: missing
+    ok = np.isfinite(dist)
+    n = ok.sum(axis=-1)
+    mean = np.where(ok, dist, 0.0).sum(axis=-1) / np.maximum(n, 1)
+    return np.where(n >= min_joints, mean, np.inf)
 
 
 @functools.lru_cache(maxsize=256)

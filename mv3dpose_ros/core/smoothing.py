@@ -53,6 +53,15 @@ class KalmanUpdate:
     accepted: np.ndarray    # [T, J] bool, an observation updated the joint now
 
 
+@dataclasses.dataclass
+class RayUpdate:
+    """What ``JointKalman.update_rays`` did, ``[N, J]`` rows of the rows it was given."""
+
+    accepted: np.ndarray    # [N, J] bool, the ray updated the joint
+    point: np.ndarray       # [N, J, 3] the ray's point nearest the prediction, NaN if not
+    variance: np.ndarray    # [N, J] its per-axis variance across the ray [m^2], NaN if not
+
+
 class JointKalman:
     """
     Per-joint constant-velocity Kalman filters of ``[T, J, 3]`` positions (T tracks) over time.
@@ -176,6 +185,62 @@ class JointKalman:
             held, pxx + (self.v * self.v) @ _XYZ / 3 * dt * dt, np.nan))
         x = np.where((upd | held)[..., None], self.x, np.nan)
         return KalmanUpdate(joints=x, state=state, variance=var, accepted=upd)
+
+    def update_rays(self, rows: np.ndarray, origin: np.ndarray, direction: np.ndarray,
+                    noise_norm: float, stamp: float, gate_chi2: float,
+                    min_variance: float = 0.0) -> RayUpdate:
+        """
+        Fold in one camera's view of joints: each 2D keypoint is a ray from ``origin``.
+
+        ``rows [N]`` are distinct filter rows, ``direction [N, J, 3]`` unit ray directions in
+        the world (NaN: not seen), ``noise_norm`` the 2D noise of one view (px / focal), so
+        the variance across the ray is ``(noise_norm * depth)^2`` at the joint's depth. A ray
+        says nothing along itself: the update moves the joint across the ray only, with the
+        residual from the predicted joint to its nearest point on the ray, gated at
+        ``gate_chi2`` (2 degrees of freedom). The isotropic covariance keeps the mean of the
+        three axes' (two shrink, one does not), so repeated views of one camera do not make
+        the depth look known. Only live joints are updated (a ray cannot place a new joint).
+
+        A stamp older than a joint's last update (a late message) is an out-of-sequence
+        observation: the residual is taken at the joint retrodicted to ``stamp`` and the
+        correction applied to the current estimate (the one-step approximation); the
+        joint's time stays where it was.
+        """
+        rows = np.asarray(rows, dtype=np.int64)
+        x, v, t = self.x[rows], self.v[rows], self.t[rows]
+        count = self.count[rows]
+        dt = stamp - t
+        seen = np.isfinite(direction[..., 0])
+        live = (count > 0) & (dt <= self.max_gap_s + 1e-9) & seen
+        dt = np.where(live, dt, 0.0)
+        back = np.abs(dt)               # prediction or retrodiction: uncertainty grows either way
+        q = self.q
+        qdt = q * back
+        pxv = self.p_xv[rows] + back * (self.p_vv[rows] + qdt / 2)
+        pxx = self.p_xx[rows] + back * (self.p_xv[rows] + pxv - qdt * back / 6)
+        pvv = self.p_vv[rows] + qdt
+        xp = x + v * dt[..., None]
+        with np.errstate(invalid='ignore'):
+            w = xp - origin
+            depth = (w * direction) @ _XYZ                        # along the ray, [N, J]
+            resid = direction * depth[..., None] - w              # to the nearest ray point
+            r = np.maximum((noise_norm * depth) ** 2, min_variance)
+            s = pxx + r
+            d2 = (resid * resid) @ _XYZ / s
+            accept = live & (depth > 0) & (d2 <= gate_chi2)
+            k1, k2 = pxx / s, pxv / s
+        a3 = accept[..., None]
+        base = np.where((dt >= 0)[..., None], xp, x)
+        self.x[rows] = np.where(a3, base + k1[..., None] * resid, x)
+        self.v[rows] = np.where(a3, v + k2[..., None] * resid, v)
+        two_thirds = 2.0 / 3.0
+        self.p_xx[rows] = np.where(accept, pxx * (1 - two_thirds * k1), self.p_xx[rows])
+        self.p_xv[rows] = np.where(accept, pxv * (1 - two_thirds * k1), self.p_xv[rows])
+        self.p_vv[rows] = np.where(accept, pvv - two_thirds * k2 * pxv, self.p_vv[rows])
+        self.t[rows] = np.where(accept, np.maximum(t, stamp), t)
+        self.count[rows] = np.where(accept, count + 1, count)
+        point = np.where(a3, xp + resid, np.nan)
+        return RayUpdate(accepted=accept, point=point, variance=np.where(accept, r, np.nan))
 
     def body_velocity(self, rows: Optional[np.ndarray] = None) -> np.ndarray:
         """

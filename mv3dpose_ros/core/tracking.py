@@ -36,7 +36,8 @@ Life cycle: a new track is TENTATIVE, or CONFIRMED at once when the caller says 
 supported (``confirm_at_birth``); after ``confirm_hits`` observations it is CONFIRMED; a
 confirmed track that misses a set is COASTING until it is observed again (CONFIRMED). A track
 not observed for more than ``max_coast_s`` is DELETED whatever the gate would accept: it takes
-no part in matching any more. A TENTATIVE track that misses a set is DELETED at once. Ids
+no part in matching any more. A TENTATIVE track that misses sets for longer than
+``tentative_coast_s`` (0: any set) is DELETED. Ids
 start at 1 and are never reused by a tracker, not even after ``reset``.
 
 Tracks are kept as a structure of arrays (``Tracks``), so an update costs the same few numpy
@@ -77,6 +78,8 @@ class TrackerConfig:
     max_coast_s: float = 1.0
     min_birth_joints: int = 6
     recovery_gate_m: float = 0.5        # second-pass gate for tracks and poses left unmatched
+    max_predict_s: float = 1.0          # motion extrapolated at most this long (then held)
+    tentative_coast_s: float = 0.0      # a TENTATIVE track survives sets without it this long
     # per-joint Kalman filters (core.smoothing.JointKalman)
     accel_noise: float = 2.0            # white acceleration noise density [m^2/s^3]
     init_speed_mps: float = 1.0         # prior std of a new joint's velocity (starts at 0)
@@ -119,12 +122,19 @@ class Tracks:
         """Return the tracks ``rows`` (index or mask) as a new ``Tracks``."""
         return Tracks(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
 
-    def predicted(self, stamp: float, predict: bool = True) -> np.ndarray:
-        """Return ``[T, J, 3]`` poses moved by their velocity to ``stamp`` (when known)."""
+    def predicted(self, stamp: float, predict: bool = True,
+                  horizon_s: float = np.inf) -> np.ndarray:
+        """
+        Return ``[T, J, 3]`` poses moved by their velocity to ``stamp`` (when known).
+
+        At most ``horizon_s`` of motion is extrapolated: a velocity says little about where
+        a person lost for seconds went (the tracking gate grows with the time instead).
+        """
         if not predict or not len(self):
             return self.pose
         velocity = np.where(np.isnan(self.velocity), 0.0, self.velocity)     # unknown: stay
-        shift = velocity * (stamp - self.last_observed)[:, None]
+        elapsed = np.clip(stamp - self.last_observed, -horizon_s, horizon_s)
+        shift = velocity * elapsed[:, None]
         return self.pose + shift[:, None, :]
 
 
@@ -175,6 +185,7 @@ class Tracker:
         self.config = config or TrackerConfig()
         self.num_joints = int(num_joints)
         self.next_id = 1
+        self._stamp: Optional[float] = None     # stamp of the last update
         self._clear()
 
     def _clear(self) -> None:
@@ -207,6 +218,7 @@ class Tracker:
         """
         cfg = self.config
         stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
+        self._stamp = stamp
         tr = self.tracks
         num_t, num_d = len(tr), len(poses)
         det = np.full(num_t, -1)
@@ -214,7 +226,8 @@ class Tracker:
         unseen = np.maximum(stamp - tr.last_observed, 0.0)
         alive = unseen <= cfg.max_coast_s + 1e-9        # expired tracks take no part at all
         if num_t and num_d:
-            cost = pose_distance(tr.predicted(stamp, cfg.predict), poses, cfg.min_shared_joints)
+            cost = pose_distance(tr.predicted(stamp, cfg.predict, cfg.max_predict_s), poses,
+                                 cfg.min_shared_joints)
             gate = np.where(alive, cfg.gate_m + cfg.gate_growth_mps * unseen, -1.0)
             rows, cols = gated_assignment(cost, gate[:, None])
             det[rows] = cols
@@ -237,10 +250,12 @@ class Tracker:
         if all_hit:                                 # the common case: nobody missed
             deleted, kept, live = Tracks.empty(self.num_joints), np.arange(num_t), tr
         else:
-            coast = ~hit & (tr.state != _TENTATIVE) & alive
+            tentative = tr.state == _TENTATIVE
+            wait = ~tentative | (unseen <= cfg.tentative_coast_s + 1e-9)
+            coast = ~hit & wait & alive
             keep = hit | coast
             tr.missed = np.where(hit, 0, tr.missed + 1)
-            tr.state = np.where(coast, _COASTING, tr.state)
+            tr.state = np.where(coast & ~tentative, _COASTING, tr.state)
             deleted = tr.take(~keep)
             deleted.state[:] = TrackState.DELETED
             kept = np.nonzero(keep)[0]
@@ -288,6 +303,48 @@ class Tracker:
             velocity = np.where(recovered[:, None], tr.velocity, velocity)
         tr.velocity = velocity
         return out
+
+    def observe_views(self, rows: np.ndarray, stamp: float, stamp_ns: int) -> None:
+        """
+        Count observations of tracks ``rows`` by single views, after their filters took them.
+
+        At the stamp of the last ``update`` a track that no 3D pose matched is observed after
+        all (CONFIRMED, not missed); a late view (older stamp) moves its last observation
+        forward only. Pose and body velocity are re-read from the joint filters.
+        """
+        rows = np.asarray(rows, dtype=np.int64)
+        if not len(rows):
+            return
+        tr = self.tracks
+        newer = tr.last_observed[rows] < stamp
+        now = rows[newer]
+        tr.last_observed[now] = stamp
+        tr.last_observed_ns[now] = stamp_ns
+        current = now[tr.missed[now] > 0] if self._stamp == stamp else now[:0]
+        tr.missed[current] = 0
+        tr.hits[current] += 1
+        confirm = current[(tr.state[current] == _COASTING)
+                          | (tr.hits[current] >= self.config.confirm_hits)]
+        tr.state[confirm] = _CONFIRMED
+        self.refresh(rows)
+
+    def refresh(self, rows: np.ndarray) -> None:
+        """Re-read the pose and body velocity of tracks ``rows`` from their joint filters."""
+        tr = self.tracks
+        known = self.filter.count[rows] > 0
+        tr.pose[rows] = np.where(known[..., None], self.filter.x[rows], tr.pose[rows])
+        velocity = self.filter.body_velocity()[rows]
+        tr.velocity[rows] = np.where(np.isnan(velocity), tr.velocity[rows], velocity)
+
+    def remove(self, rows: np.ndarray) -> Tracks:
+        """Delete tracks ``rows`` now (e.g. a duplicate merged into another); return them."""
+        keep = np.ones(len(self.tracks), dtype=bool)
+        keep[rows] = False
+        dead = self.tracks.take(~keep)
+        dead.state[:] = TrackState.DELETED
+        self.tracks = self.tracks.take(keep)
+        self.filter.reindex(np.nonzero(keep)[0])
+        return dead
 
     def _births(self, n: int, stamp: float, stamp_ns: int, confirm: np.ndarray) -> Tracks:
         instant = self.config.confirm_hits <= 1

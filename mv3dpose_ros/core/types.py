@@ -44,6 +44,15 @@ class JointState(enum.IntEnum):
     PREDICTED = 2
 
 
+class PositionSource(enum.IntEnum):
+    """What a track's ``position`` is; values equal mv3dpose_msgs/TrackedSkeleton's."""
+
+    HIPS = 0        # the midpoint of the filtered hip joints (REP-155 body origin)
+    BODY = 1        # a hip is unknown: the centre of the track's known joints (covariance
+    #                 widened by the hips' usual offset from it)
+    NONE = 2        # nothing known (never for a published CONFIRMED or COASTING track)
+
+
 @dataclass
 class Track:
     """One tracked person as output by ``Fusion.step`` for one synchronised set of views."""
@@ -73,6 +82,7 @@ class Track:
     # The stamps in exact integer nanoseconds (None: derive from the float seconds):
     first_seen_ns: Optional[int] = None
     last_observed_ns: Optional[int] = None
+    position_source: PositionSource = PositionSource.HIPS
 
     @property
     def num_joints(self) -> int:
