@@ -23,11 +23,12 @@ values); what rclpy refuses it refuses with a 'malformed' ``InvalidMessage``.
 import math
 
 from builtin_interfaces.msg import Time
-from mv3dpose_msgs.msg import Keypoint2D, Person2D, Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_msgs.msg import (Keypoint2D, Person2D, Person2DArray, TrackedSkeleton,
+                               TrackedSkeletonArray)
+from mv3dpose_ros.core.types import PositionSource, Track, TrackState
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, message_to_dict,
-                                       ns_to_stamp, person2d_array_to_numpy, Persons2D,
-                                       tracks_to_cdr, tracks_to_msg)
+                                       msg_to_tracks, ns_to_stamp, person2d_array_to_numpy,
+                                       Persons2D, tracks_to_cdr, tracks_to_msg)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -339,7 +340,8 @@ def random_track(rng, joints) -> Track:
         position_covariance=(None if rng.random() < 0.2 else _with_specials(
             rng, np.eye(3) * rng.uniform(-1e-3, 0.1), 0.05)),
         first_seen_ns=None if rng.random() < 0.3 else int(rng.integers(0, 2**62)),  # odd too
-        last_observed_ns=None if rng.random() < 0.3 else int(rng.integers(0, 2**31 * 10**9)))
+        last_observed_ns=None if rng.random() < 0.3 else int(rng.integers(0, 2**31 * 10**9)),
+        position_source=PositionSource(int(rng.integers(0, 3))))
 
 
 def test_tracks_to_cdr_equals_serialised_tracks_to_msg():
@@ -369,3 +371,53 @@ def test_tracks_to_cdr_equals_serialised_tracks_to_msg():
             if track.last_observed_ns is not None:          # exact, not via float seconds
                 stamp = sk['last_observed']
                 assert stamp['sec'] * 10**9 + stamp['nanosec'] == track.last_observed_ns
+            known = (track.position_source != PositionSource.NONE
+                     and np.isfinite(track.position).all())
+            if known:                                       # published as the core says
+                assert sk['position_source'] == track.position_source
+                assert list(sk['position'].values()) == track.position.tolist()
+            else:                                           # said so, never a silent origin
+                assert sk['position_source'] == TrackedSkeleton.POSITION_NONE
+                assert list(sk['position'].values()) == [0.0, 0.0, 0.0]
+                assert sk['position_covariance'][0] == -1.0
+
+
+def _body_track(joints: int = 17) -> Track:
+    """Return a CONFIRMED track whose root is the body centre (a hip unknown)."""
+    pose = np.random.default_rng(5).normal([1.0, 2.0, 1.0], 0.3, (joints, 3))
+    return Track(track_id=7, state=TrackState.CONFIRMED, joints=pose,
+                 confidence=np.full(joints, 0.9), joint_state=np.ones(joints, np.uint8),
+                 num_views=np.full(joints, 3, np.uint8),
+                 reprojection_error=np.full(joints, 2.0), position=np.array([1.0, 2.0, 1.0]),
+                 velocity=np.array([0.5, 0.0, 0.0]), first_seen=1.0, last_observed=2.0,
+                 position_covariance=np.eye(3) * 0.0225, position_source=PositionSource.BODY)
+
+
+@pytest.mark.parametrize('source', list(PositionSource))
+def test_position_source_round_trip_through_rclpy(source):
+    """The fast encoder's ``position_source`` byte is where rclpy reads it, and comes back."""
+    track = _body_track()
+    track.position_source = source
+    header = Header(stamp=ns_to_stamp(2 * 10**9), frame_id='world')
+    data = tracks_to_cdr([track, _body_track(0)], header, 'coco17')
+    msg = deserialize_message(data, TrackedSkeletonArray)
+    want = tracks_to_msg([track, _body_track(0)], header, 'coco17')
+    assert message_to_dict(msg) == message_to_dict(
+        deserialize_message(serialize_message(want), TrackedSkeletonArray))
+    sk = msg.skeletons[0]
+    assert sk.position_source == source
+    assert msg.skeletons[1].position_source == TrackedSkeleton.POSITION_BODY
+    back = msg_to_tracks(msg)[0]
+    assert back.position_source == source
+    if source == PositionSource.NONE:                  # nothing known: no origin either
+        assert (sk.position.x, sk.position.y, sk.position.z) == (0.0, 0.0, 0.0)
+        assert sk.position_covariance[0] == -1.0 and np.isnan(back.position).all()
+    else:
+        np.testing.assert_array_equal(back.position, track.position)
+        np.testing.assert_array_equal(back.position_covariance, track.position_covariance)
+
+
+def test_position_source_constants_equal_the_core():
+    assert [TrackedSkeleton.POSITION_HIPS, TrackedSkeleton.POSITION_BODY,
+            TrackedSkeleton.POSITION_NONE] == [int(s) for s in PositionSource]
+    assert TrackedSkeleton.get_fields_and_field_types()['position_source'] == 'uint8'

@@ -18,8 +18,9 @@
 import io
 import json
 
-from mv3dpose_ros.core.types import JointState, Track, TrackState
-from mv3dpose_ros.io.tracks_jsonl import parse_line, read_tracks, TracksFormatError, TracksWriter
+from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
+from mv3dpose_ros.io.tracks_jsonl import (frame_to_line, parse_line, read_tracks,
+                                          TracksFormatError, TracksWriter)
 import numpy as np
 import pytest
 
@@ -109,6 +110,8 @@ def test_stream_target_and_units():
     ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
      '"score": {}}]}', 'score {} is not a number'),
     ('{"frame": 1, "layout": 5, "tracks": []}', 'layout 5 is not a string'),
+    ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
+     '"position_source": "feet"}]}', "unknown position_source 'feet'"),
 ])
 def test_bad_lines_are_reported_and_skipped(tmp_path, line, reason):
     with pytest.raises(TracksFormatError, match=reason.replace('[', r'\[')):
@@ -127,3 +130,28 @@ def test_line_that_is_not_utf8_is_reported_and_skipped(tmp_path):
     issues = []
     assert [f.frame for f in read_tracks(str(path), issues)] == [0, 2]
     assert issues == [f'{path}:2: not UTF-8 text (byte 10)']
+
+
+def test_position_source_round_trip_and_default(tmp_path):
+    """What position is travels with it; files from before the field read as hips."""
+    from mv3dpose_ros.commands.convert import record_to_track
+    body = make_track(1)
+    body.position_source = PositionSource.BODY
+    unknown = make_track(2)
+    unknown.position = np.full(3, np.nan)        # HIPS claimed, nothing known: said so
+    none = make_track(3)
+    none.position_source = PositionSource.NONE   # a position it does not vouch for: dropped
+    line = json.loads(frame_to_line(0, [make_track(4), body, unknown, none], 'coco17'))
+    got = [(t['position_source'], t['position']) for t in line['tracks']]
+    assert got == [('hips', [1.0, 2.0, 1.0]), ('body', [1.0, 2.0, 1.0]), ('none', None),
+                   ('none', None)]
+    frame = parse_line(json.dumps(line))
+    assert [t.position_source for t in frame.tracks] == [
+        PositionSource.HIPS, PositionSource.BODY, PositionSource.NONE, PositionSource.NONE]
+    assert 'position_source' not in frame.tracks[1].extra
+    back = record_to_track(frame.tracks[1], 0.0)
+    assert back.position_source == PositionSource.BODY and back.position.tolist() == [1, 2, 1]
+    old = parse_line('{"frame": 0, "tracks": [{"id": 1, "state": "confirmed", "joints": [], '
+                     '"position": [1, 2, 3]}]}')
+    assert old.tracks[0].position_source == PositionSource.HIPS
+    assert record_to_track(old.tracks[0], 0.0).position_source == PositionSource.HIPS

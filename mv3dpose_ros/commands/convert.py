@@ -420,7 +420,7 @@ def tracks_from_bag(path: str, topic: Optional[str] = None
 
 def record_to_track(rec, stamp: float):
     """Turn a tracks-file ``TrackRecord`` back into a core ``Track`` (unknown fields: NaN/0)."""
-    from mv3dpose_ros.core.types import JointState, Track
+    from mv3dpose_ros.core.types import JointState, PositionSource, Track
     joints = np.asarray(rec.joints, dtype=np.float64)
     valid = np.isfinite(joints).all(axis=1)
     states = (np.asarray(rec.joint_state, dtype=np.uint8) if rec.joint_state is not None
@@ -439,7 +439,8 @@ def record_to_track(rec, stamp: float):
                    else np.zeros(len(joints), np.uint8)),
         reprojection_error=np.full(len(joints), np.nan), position=vec('position'),
         velocity=vec('velocity'), first_seen=stamp, last_observed=stamp,
-        score=float(extra.get('score', 0.0) or 0.0))
+        score=float(extra.get('score', 0.0) or 0.0),
+        position_source=getattr(rec, 'position_source', PositionSource.HIPS))
 
 
 def bag_to_jsonl(path: str, output: str, topic: Optional[str] = None, fps: float = 0.0,

@@ -32,7 +32,7 @@ the signal towards zero (the reference code's zero-bleed bug) and the ends are n
 import dataclasses
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from mv3dpose_ros.core.types import JointState, Track, TrackState
+from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
@@ -339,11 +339,14 @@ def smooth_track_sequence(frames: Sequence[Sequence[Track]], sigma_frames: float
             state = np.where(valid, JointState.TRIANGULATED, JointState.MISSING).astype(np.uint8)
             state[interp[row]] = JointState.PREDICTED
             conf = np.where(valid, conf_all[row], 0.0)
-            position = tr.position
+            position, source = tr.position, tr.position_source
             if root_joints is not None:
-                position = smooth[row, list(root_joints)].mean(axis=0)
+                hips = smooth[row, list(root_joints)].mean(axis=0)
+                if np.isfinite(hips).all():      # else the live root (e.g. the body centre)
+                    position, source = hips, PositionSource.HIPS
             out[f][i] = dataclasses.replace(tr, joints=smooth[row].copy(), joint_state=state,
-                                            confidence=conf, position=position)
+                                            confidence=conf, position=position,
+                                            position_source=source)
     return out
 
 
@@ -459,12 +462,16 @@ class FixedLagSmoother:
         confidence = np.where((state == _PREDICTED) & (tr.joint_state == _MISSING),
                               0.5 * np.max(tr.confidence, initial=0.0), tr.confidence)
         position, velocity, cov = tr.position, tr.velocity, tr.position_covariance
+        source = tr.position_source
         if self.root is not None:
             left, right = self.root
-            position = (joints[left] + joints[right]) / 2
-            cov = (var[left] + var[right]) / 4 * np.eye(3)
+            hips = (joints[left] + joints[right]) / 2
+            if np.isfinite(hips).all():    # else the live root (e.g. the body centre) stays
+                position, source = hips, PositionSource.HIPS
+                cov = (var[left] + var[right]) / 4 * np.eye(3)
             if line[left] and line[right]:
                 velocity = (vel_line[left] + vel_line[right]) / 2
         return dataclasses.replace(tr, joints=joints, joint_state=state, joint_variance=var,
                                    confidence=confidence, position=position,
-                                   velocity=velocity, position_covariance=cov)
+                                   velocity=velocity, position_covariance=cov,
+                                   position_source=source)

@@ -24,10 +24,13 @@ Schema (units are always metres on write)::
                  "confidence": [c, ...],                  # J entries in [0, 1]
                  "joint_state": [1, ...],                 # 0 missing, 1 triangulated, 2 predicted
                  "num_views": [3, ...], "position": [x, y, z] or null,
+                 "position_source": "hips",
                  "velocity": [vx, vy, vz] or null, "score": 0.9}]}
 
 ``state`` is one of ``tentative``, ``confirmed``, ``coasting``, ``deleted`` (a deleted track
-appears once, as a tombstone). Only ``frame``, ``tracks`` and per track ``id``, ``state``,
+appears once, as a tombstone). ``position_source`` says what ``position`` is: ``hips`` (the hip
+midpoint), ``body`` (a hip is unknown: the body centre) or ``none`` (position is null); files
+without it read as ``hips``. Only ``frame``, ``tracks`` and per track ``id``, ``state``,
 ``joints`` are required on read; readers ignore unknown keys. Coordinates are rounded to
 micrometres, confidences to 1e-4. Reading is strict (``core.files.load_json`` limits, every
 known field type- and range-checked): a bad line raises ``TracksFormatError`` naming the field,
@@ -41,13 +44,14 @@ import math
 from typing import IO, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
 
 from mv3dpose_ros.core.files import load_json, LoadError
-from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_ros.core.types import PositionSource, Track, TrackState
 import numpy as np
 
 logger = logging.getLogger(__name__)
 
 _UNITS = {'m': 1.0, 'cm': 0.01, 'mm': 0.001}
 _STATES = {s.name.lower(): s for s in TrackState}
+_SOURCES = {s.name.lower(): s for s in PositionSource}
 
 
 def _xyz(v: np.ndarray) -> Optional[List[float]]:
@@ -58,6 +62,10 @@ def _xyz(v: np.ndarray) -> Optional[List[float]]:
 def track_to_dict(track: Track) -> dict:
     """Convert a core :class:`Track` to its JSON object (missing joints become null)."""
     valid = np.asarray(track.valid) & np.isfinite(track.joints).all(-1)
+    source = PositionSource(track.position_source)
+    position = None if source == PositionSource.NONE else _xyz(track.position)
+    if position is None:
+        source = PositionSource.NONE
     return {
         'id': int(track.track_id),
         'state': TrackState(track.state).name.lower(),
@@ -66,7 +74,8 @@ def track_to_dict(track: Track) -> dict:
                        for c in np.asarray(track.confidence, dtype=float)],
         'joint_state': [int(s) for s in track.joint_state],
         'num_views': [int(n) for n in track.num_views],
-        'position': _xyz(track.position),
+        'position': position,
+        'position_source': source.name.lower(),
         'velocity': _xyz(track.velocity),
         'score': round(float(track.score), 4),
     }
@@ -142,6 +151,7 @@ class TrackRecord:
     confidence: np.ndarray
     joint_state: Optional[np.ndarray] = None
     extra: dict = field(default_factory=dict)
+    position_source: PositionSource = PositionSource.HIPS   # of extra['position']
 
 
 @dataclass
@@ -237,7 +247,13 @@ def _parse_track(obj: object, scale: float) -> TrackRecord:
             raise TracksFormatError(f'track {tid}: "joint_state" is not a list of {n} values')
         js = np.array([_integer(v, f'track {tid}: joint_state', 0, 3) for v in js], np.uint8)
     rest = {k: v for k, v in obj.items()
-            if k not in ('id', 'state', 'joints', 'confidence', 'joint_state')}
+            if k not in ('id', 'state', 'joints', 'confidence', 'joint_state', 'position_source')}
+    source = obj.get('position_source', 'hips')
+    source = _SOURCES.get(source.lower()) if isinstance(source, str) else None
+    if source is None:
+        raise TracksFormatError(f'track {tid}: unknown position_source '
+                                f'{repr(obj["position_source"])[:40]} '
+                                f'(known: {", ".join(_SOURCES)})')
     for key in ('position', 'velocity'):
         if key in rest:
             v = _numbers(rest[key], f'track {tid}: {key}', 3, MAX_COORDINATE_M, nullable=True)
@@ -249,8 +265,10 @@ def _parse_track(obj: object, scale: float) -> TrackRecord:
         rest['num_views'] = [_integer(v, f'track {tid}: num_views', 0, 256) for v in views]
     if rest.get('score') is not None:
         rest['score'] = _number(rest['score'], f'track {tid}: score', 1e6)
+    if source == PositionSource.NONE:
+        rest['position'] = None
     return TrackRecord(id=tid, state=state, joints=joints, confidence=conf, joint_state=js,
-                       extra=rest)
+                       extra=rest, position_source=source)
 
 
 def parse_line(line: str) -> TracksFrame:

@@ -73,8 +73,8 @@ def sample_message(kind: str, index: int) -> Any:
             first_seen=Time(sec=10 + t, nanosec=5), last_observed=Time(sec=20 + t, nanosec=7),
             age=100 + t, missed=t, position=Point(x=1.5, y=-2.0, z=0.9 + t),
             velocity=Vector3(x=0.1, y=0.2, z=-0.3), velocity_valid=bool(t % 2),
-            position_covariance=[float(v) for v in range(9)], joints=joints,
-            source_cameras=[f'cam{c}' for c in range(t + 2)]))
+            position_covariance=[float(v) for v in range(9)], position_source=t % 3,
+            joints=joints, source_cameras=[f'cam{c}' for c in range(t + 2)]))
     return TrackedSkeletonArray(header=header, layout='coco17', skeletons=skeletons)
 
 

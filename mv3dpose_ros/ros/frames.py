@@ -19,15 +19,18 @@ Coordinate frames of the rig and of the tracked people, as ``geometry_msgs``.
   y down, z forward; ``<camera>`` is the camera's ROS name, ``ros/names.py``: ``00_03`` ->
   ``cam00_03``), translation = camera centre, rotation = camera -> world. The rig YAML's
   ``T_world_cam`` is exactly this transform, so a static TF of it and the rig agree.
-- People: ``world_frame`` -> ``<prefix><track_id>`` at the root joint (hip midpoint) with the
-  REP-155 body convention: x forward, y left, z up (the world's). The heading is the yaw of the
+- People: ``world_frame`` -> ``<prefix><track_id>`` at the track's ``position`` (the hip
+  midpoint, or the body centre when a hip is unknown: ``Track.position_source``, as
+  ``TrackedSkeleton.position_source``) with the REP-155 body convention: x forward, y left,
+  z up (the world's). A track without a position (source NONE or not finite) gets no frame,
+  never one at the origin. The heading is the yaw of the
   left-minus-right hip vector turned by -90 degrees; when the hips are missing or too close
   (< 5 cm apart horizontally) it falls back to the direction of motion (> 0.3 m/s), then to the
   last heading seen for that track, then to the world's x axis.
 - ``root_poses`` / ``pose_array_cdr``: the standard ``geometry_msgs/PoseArray`` output, one
-  pose per skeleton of ``~/tracks`` that has a root (DELETED tombstones left out), in the same
-  order and header, serialised straight to CDR like ``~/tracks`` (``root_pose_array`` builds
-  the same as a message object).
+  pose per skeleton of ``~/tracks`` that has a root (DELETED tombstones and position source
+  NONE left out, so not index-aligned), in the same order and header, serialised straight to
+  CDR like ``~/tracks`` (``root_pose_array`` builds the same as a message object).
 
 No rclpy here: only message classes, so the functions are testable without a node or DDS.
 """
@@ -40,7 +43,7 @@ from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped
 from mv3dpose_ros.core.calibration import matrix_to_quaternion, quaternion_to_matrix
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.skeleton import Layout
-from mv3dpose_ros.core.types import JointState, Track, TrackState
+from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 from mv3dpose_ros.ros.messages import CdrWriter
 from mv3dpose_ros.ros.names import camera_namespace
 import numpy as np
@@ -151,6 +154,9 @@ def camera_from_transform(camera: Camera, tf: TransformStamped) -> Camera:
 
 
 def _root(track: Track) -> Optional[Tuple[float, float, float]]:
+    """Return the published position (hips or body centre), None when there is none."""
+    if track.position_source == PositionSource.NONE:
+        return None
     x, y, z = (float(v) for v in track.position)
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
         return None
@@ -174,7 +180,8 @@ def root_poses(tracks: Sequence[Track], yaws: Sequence[Optional[float]]) -> np.n
     """
     Return the standard output's poses ``[K, 7]`` (x, y, z, qx, qy, qz, qw), float64.
 
-    One row per non-DELETED track with a known root, in the order of ``tracks`` (the order of
+    One row per non-DELETED track with a known root (hips or body centre; position source NONE
+    or a non-finite position gives no row), in the order of ``tracks`` (the order of
     ``TrackedSkeletonArray.skeletons``); orientation = heading (identity when unknown).
     """
     rows = []

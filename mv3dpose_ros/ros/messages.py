@@ -16,7 +16,8 @@
 Conversions between the core's numpy arrays / ``Track`` objects and ``mv3dpose_msgs``.
 
 The one place where NaN (the core's "missing") becomes explicit validity (``confidence == 0``,
-``Joint3D.MISSING``, ``velocity_valid``), so no published field ever carries NaN or inf.
+``Joint3D.MISSING``, ``velocity_valid``, ``position_source == POSITION_NONE``), so no published
+field ever carries NaN or inf.
 """
 
 from dataclasses import dataclass
@@ -29,7 +30,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Vector3
 from mv3dpose_msgs.msg import (Joint3D, Keypoint2D, Person2D, Person2DArray, SkeletonInfo,
                                TrackedSkeleton, TrackedSkeletonArray)
-from mv3dpose_ros.core.types import JointState, Track, TrackState
+from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 import numpy as np
 from sensor_msgs.msg import RegionOfInterest
 from std_msgs.msg import Header
@@ -325,10 +326,11 @@ class _TrackFields(NamedTuple):
     last_observed: Tuple[int, int]
     age: int
     missed: int
-    position: List[float]                    # zeros when not finite
+    position: List[float]                    # zeros when not finite (then source NONE)
     velocity: List[float]                    # zeros unless velocity_valid
     velocity_valid: bool
     covariance: Tuple[float, ...]            # 9 values; _COVARIANCE_UNKNOWN when not finite
+    position_source: int                     # PositionSource; NONE when position is not finite
     source_cameras: Tuple[str, ...]
 
 
@@ -346,10 +348,14 @@ class _JointFields(NamedTuple):
 def _track_fields(track: Track) -> _TrackFields:
     """Return the per-track values ``track`` publishes."""
     root = np.asarray(track.position, dtype=np.float64).tolist()
+    source = int(track.position_source) if track.position_source in _SOURCES else _NONE
+    root_ok = source != _NONE and all(map(math.isfinite, root))
+    if not root_ok:                  # an unknown root is said so, never a silent origin
+        source = _NONE
     vel = np.asarray(track.velocity, dtype=np.float64).tolist()
     vel_ok = all(map(math.isfinite, vel))
     cov = _COVARIANCE_UNKNOWN
-    if track.position_covariance is not None:
+    if track.position_covariance is not None and root_ok:
         c = np.asarray(track.position_covariance, dtype=np.float64).reshape(-1)
         if c.size == 9 and (np.abs(c) <= F32_MAX).all() and c[0] >= 0:
             cov = tuple(c.tolist())
@@ -360,9 +366,9 @@ def _track_fields(track: Track) -> _TrackFields:
         last_observed=_split_stamp(track.last_observed, track.last_observed_ns),
         age=int(track.age),
         missed=int(track.missed),
-        position=root if all(map(math.isfinite, root)) else [0.0, 0.0, 0.0],
+        position=root if root_ok else [0.0, 0.0, 0.0],
         velocity=vel if vel_ok else [0.0, 0.0, 0.0], velocity_valid=vel_ok, covariance=cov,
-        source_cameras=tuple(track.source_cameras))
+        position_source=source, source_cameras=tuple(track.source_cameras))
 
 
 def _joint_fields(tracks: Sequence[Track]) -> _JointFields:
@@ -409,6 +415,7 @@ def _skeleton_msg(f: _TrackFields, j: _JointFields) -> TrackedSkeleton:
     x, y, z = f.velocity
     msg.velocity = Vector3(x=x, y=y, z=z)
     msg.position_covariance = f.covariance
+    msg.position_source = f.position_source
     msg.joints = [Joint3D(position=Point(x=x, y=y, z=z), confidence=c, state=s, num_views=v,
                           reprojection_error=e, position_variance=pv)
                   for (x, y, z), c, s, v, e, pv in zip(
@@ -432,10 +439,12 @@ def tracks_to_msg(tracks: Iterable[Track], header: Header, layout: str) -> Track
 
 
 _COVARIANCE_UNKNOWN = (-1.0,) + (0.0,) * 8
+_SOURCES = frozenset(int(s) for s in PositionSource)
+_NONE = int(PositionSource.NONE)
 # TrackedSkeleton up to its joint count, from an 8-aligned start (little-endian CDR):
 # track_id, state, confidence, first_seen, last_observed, age, missed, position, velocity,
-# velocity_valid, position_covariance, len(joints).
-_SKELETON_HEAD = struct.Struct('<QB3xfiIiIII3d3d?7x9dI')
+# velocity_valid, position_covariance, position_source, len(joints).
+_SKELETON_HEAD = struct.Struct('<QB3xfiIiIII3d3d?7x9dB3xI')
 _STAMP = struct.Struct('<iI')
 # One Joint3D from an 8-aligned start: 40 bytes, no padding (the next one starts right after).
 _JOINT3D = np.dtype({'names': ['position', 'confidence', 'state', 'num_views',
@@ -521,7 +530,7 @@ def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes
         num = len(j.state)
         w.pack(_SKELETON_HEAD, f.track_id, f.state, f.confidence, *f.first_seen,
                *f.last_observed, f.age, f.missed, *f.position, *f.velocity, f.velocity_valid,
-               *f.covariance, num, align=8)
+               *f.covariance, f.position_source, num, align=8)
         joints = np.zeros(num, _JOINT3D)
         joints['position'] = j.xyz
         joints['confidence'] = j.confidence
@@ -553,18 +562,22 @@ def msg_to_tracks(msg: TrackedSkeletonArray) -> List[Track]:
             cov[:] = np.nan
         velocity = (np.array([s.velocity.x, s.velocity.y, s.velocity.z]) if s.velocity_valid
                     else np.full(3, np.nan))
+        source = (PositionSource(s.position_source) if s.position_source in _SOURCES
+                  else PositionSource.NONE)
+        position = (np.full(3, np.nan) if source == PositionSource.NONE
+                    else np.array([s.position.x, s.position.y, s.position.z], dtype=np.float64))
         tracks.append(Track(
             track_id=int(s.track_id), state=TrackState(s.state), joints=joints,
             confidence=np.array([j.confidence for j in s.joints], dtype=np.float64),
             joint_state=states, num_views=np.array([j.num_views for j in s.joints], np.uint8),
             reprojection_error=err,
-            position=np.array([s.position.x, s.position.y, s.position.z], dtype=np.float64),
+            position=position,
             velocity=velocity, first_seen=stamp_to_sec(s.first_seen),
             last_observed=stamp_to_sec(s.last_observed), age=int(s.age), missed=int(s.missed),
             score=float(s.confidence), source_cameras=tuple(s.source_cameras),
             joint_variance=var, position_covariance=cov,
             first_seen_ns=stamp_to_ns(s.first_seen),
-            last_observed_ns=stamp_to_ns(s.last_observed)))
+            last_observed_ns=stamp_to_ns(s.last_observed), position_source=source))
     return tracks
 
 
