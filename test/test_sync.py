@@ -461,6 +461,14 @@ def _lagging_rig(sync, n_sets, lag_ns, period=S, base=1500 * MS):
     return out + sync.poll(events[-1][2] + 10 * S)
 
 
+def test_the_default_wait_is_a_latency_budget():
+    """By default a set waits at most 0.25 s: a camera later than that is late, not waited for."""
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    out = _lagging_rig(sync, 20, 1200 * MS)
+    assert sync.max_wait_ns == 250 * MS
+    assert all(s.missing == ('cam3',) for s in out) and sync.stats['cam3'].late >= 19
+
+
 def test_wait_adapts_to_a_camera_whose_detections_come_seconds_later():
     """A steady 1.2 s inference skew: learned from the late messages, then no set loses it."""
     fixed = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
@@ -468,7 +476,8 @@ def test_wait_adapts_to_a_camera_whose_detections_come_seconds_later():
     out = _lagging_rig(fixed, 20, 1200 * MS)
     assert fixed.max_wait_ns == 100 * MS
     assert all(s.missing == ('cam3',) for s in out) and fixed.stats['cam3'].late >= 19
-    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
+                              SyncConfig(max_wait_s=0.1, max_wait_cap_s=2.0))
     out = _lagging_rig(sync, 20, 1200 * MS)
     # The first sets measure the spread (4 samples, the late messages included); from then on
     # every set waits for cam3.

@@ -103,7 +103,8 @@ class FusionConfig:
     tracking_recovery_gate_m: float = 0.5   # second-chance gate before starting a new track
     tracking_prediction: bool = True        # constant-velocity prediction of the root
     confirm_hits: int = 3                   # observations before a track is CONFIRMED
-    max_coast_s: float = 1.0                # unobserved time before a track is DELETED
+    max_coast_s: float = 3.0                # unobserved time before a track is DELETED: a
+    #                                         person lost for less is found again with its id
     confirm_at_birth_ratio: float = 0.6     # a new track with this share of the layout's joints
     #                                         triangulated from >= min(3, cameras) views is
     #                                         CONFIRMED at once (> 1: never)

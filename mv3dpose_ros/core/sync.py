@@ -99,9 +99,13 @@ class SyncConfig:
     #                                  observed frame period (a wider value is narrowed to it)
     max_wait_s: float = 0.1          # arrival time [s] a set waits for missing cameras after
     #                                  its first message arrived (covers inference skew)
-    max_wait_cap_s: float = 2.0      # the wait adapts up to this: 1.3 x p95 of the measured
-    #                                  arrival spread of the sets (<= max_wait_s: fixed wait)
-    min_views: int = 2               # partial sets with fewer cameras are dropped
+    max_wait_cap_s: float = 0.25     # the latency budget: the wait adapts up to this (1.3 x
+    #                                  p95 of the measured arrival spread of the sets); a
+    #                                  message later than its set still updates the tracks
+    #                                  (fusion.view_updates); <= max_wait_s: fixed wait
+    min_views: int = 1               # partial sets with fewer cameras are dropped (1: a
+    #                                  camera alone updates the tracks it sees when
+    #                                  fusion.view_updates is on; otherwise 2 is used)
     max_queue: int = 30              # buffered messages per camera; beyond, the oldest set is
     #                                  decided at once (counted as overflow)
     jump_s: float = 0.5              # a stamp this far [s] from the stream time is an outlier

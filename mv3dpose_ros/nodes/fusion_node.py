@@ -118,6 +118,7 @@ class _Camera:
         self.camera_info_received = False
         self.skips = 0                         # SkippedImages notices taken
         self.skips_rejected = 0                # ... and refused (bad stamps)
+        self.late_used = 0                     # late for their set, folded in at their stamp
 
     @property
     def calibration_problem(self) -> str:
@@ -381,6 +382,10 @@ class FusionNode(Node):
             self.fusion_config.validate()
         except (TypeError, ValueError) as exc:
             raise ConfigError(f'parameters: {exc}') from exc
+        if self.sync_config.min_views < 2 and not self.fusion_config.view_updates:
+            # A set of one camera only updates tracks through single-view updates.
+            self.config_warnings.append('sync.min_views 1 needs fusion.view_updates: using 2')
+            self.sync_config.min_views = 2
         if len(ids) < max(2, self.fusion_config.min_views):
             raise ConfigError(f'{len(ids)} camera(s) {ids}: fusion needs at least '
                               f'{max(2, self.fusion_config.min_views)}')
@@ -616,7 +621,7 @@ class FusionNode(Node):
             if result.reset:
                 self._reset(result.reason, from_sync=True)
             if result.kind == 'late':
-                self._reject(state, 'late', result.reason, now)
+                self._late(state, poses, stamp_ns, result.reason, now)
             elif result.kind == 'outlier':   # held; counted by the synchroniser when dropped
                 self._rlog(f'{cam}:outlier', f'Person2DArray of camera {cam} on {state.topic}: '
                            f'{result.reason}')
@@ -630,6 +635,21 @@ class FusionNode(Node):
             for synced in result.sets:
                 self._process(synced)
             self._release(arrival)     # after a late message too (add decides nothing then)
+
+    def _late(self, state: _Camera, poses: np.ndarray, stamp_ns: int, reason: str,
+              now: int) -> None:
+        """Fold a message that missed its set into the tracks at its own stamp, or drop it."""
+        if not self.fusion_config.view_updates:
+            self._reject(state, 'late', reason, now)
+            return
+        try:
+            self.fusion.update_view(state.name, poses, stamp_ns / NS_PER_S, stamp_ns)
+        except Exception as exc:  # noqa: B902 - a core failure must not stop the node
+            self.counts['fusion_errors'] += 1
+            self._rlog('fusion_error', f'Fusion.update_view failed on camera {state.name} at '
+                       f'{stamp_ns / NS_PER_S:.6f} s ({exc!r}); message dropped')
+            return
+        state.late_used += 1
 
     def _on_skipped(self, cam: str, msg: SkippedImages) -> None:
         """Stop waiting for the camera's images it announces it sends no persons for."""
@@ -857,7 +877,8 @@ class FusionNode(Node):
                           'skipped by pose2d (announced gaps)': ss.skipped,
                           'received': st.received, 'accepted': st.accepted,
                           'used in sets': ss.used, 'dropped by sync': ss.dropped,
-                          'late': ss.late, 'outlier stamps': ss.outliers,
+                          'late': ss.late, 'late, used (tracks updated at its stamp)':
+                              st.late_used, 'outlier stamps': ss.outliers,
                           'missing from sets': ss.missing,
                           'skip notices (persons_2d/skipped)': st.skips,
                           'skip notices rejected': st.skips_rejected,
@@ -906,7 +927,8 @@ class FusionNode(Node):
                 'dropped at input (validation)': sum(
                     n for c in self.camera_ids for r, n in self.cams[c].rejected.items()
                     if r != 'late'),
-                'dropped in sync: late': sum(x.late for x in stats),
+                'dropped in sync: late': sum(x.late for x in stats) - sum(
+                    self.cams[c].late_used for c in self.camera_ids),
                 'dropped in sync: outlier stamps': sum(x.outliers for x in stats),
                 'dropped in sync: too few views': sum(x.unmatched['too_few_views']
                                                       for x in stats),
@@ -946,6 +968,13 @@ class FusionNode(Node):
                       'processing p95 (ms)': self.processing.percentile(95) * 1e3,
                       'processing max (ms)': self.processing.percentile(100) * 1e3,
                       'fusion errors': self.counts['fusion_errors']}
+            if self.fusion is not None:
+                fc = self.fusion.counts
+                values.update({
+                    'tracks updated by single views': fc['view_updates'],
+                    'late messages used': fc['late_views_used'],
+                    'tracks recovered after a gap': fc['recovered'],
+                    'duplicate tracks merged': fc['merged_tracks']})
             level, message = OK, f'{len(self.last_tracks)} tracks'
             if self.fusion is None:
                 level, message = WARN, 'waiting for calibration (CameraInfo)'
