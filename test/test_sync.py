@@ -494,7 +494,8 @@ def test_adaptive_wait_is_capped_and_returns_when_the_skew_goes():
     out = _lagging_rig(sync, 10, 1200 * MS)
     assert sync.max_wait_ns == 1000 * MS          # capped: cam3 stays late, others go on
     assert all(not s.complete for s in out) and sync.stats['cam3'].late >= 9
-    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
+                              SyncConfig(max_wait_s=0.1, max_wait_cap_s=2.0))
     _lagging_rig(sync, 10, 600 * MS)
     assert sync.max_wait_ns == pytest.approx(1.3 * 600 * MS, rel=1e-6)
     # 40 on-time sets later the recent spreads are all small: back to max_wait_s.
@@ -507,7 +508,8 @@ def test_adaptive_wait_is_capped_and_returns_when_the_skew_goes():
 
 def test_cameras_lagging_seconds_behind_capture_are_no_outliers():
     """Steady 1-3 s capture -> detection latency: every set is emitted, nothing is an outlier."""
-    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'], SyncConfig(max_wait_s=0.1))
+    sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
+                              SyncConfig(max_wait_s=0.1, max_wait_cap_s=2.0))
     out = _lagging_rig(sync, 30, 1500 * MS, base=1000 * MS)      # 1.0 s and 2.5 s
     assert sync.resets == 0 and sync.forward_jumps == 0
     assert sum(st.outliers for st in sync.stats.values()) == 0
@@ -520,7 +522,7 @@ def test_detection_delay_varying_by_seconds_between_slow_sets_is_no_outlier():
     """Sets every 3.2 s whose capture -> arrival delay varies in 1-3 s: no outlier, no set lost."""
     rng = random.Random(3)
     cams = ['cam0', 'cam1', 'cam2', 'cam3']
-    sync = StreamSynchronizer(cams, SyncConfig(max_wait_s=0.1))
+    sync = StreamSynchronizer(cams, SyncConfig(max_wait_s=0.1, max_wait_cap_s=2.0))
     events = []
     for f in range(30):
         delay = rng.randint(1000, 3000) * MS

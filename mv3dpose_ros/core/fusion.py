@@ -213,7 +213,8 @@ class Fusion:
             confirm_hits=cfg.confirm_hits, max_coast_s=cfg.max_coast_s,
             min_birth_joints=cfg.min_birth_joints, accel_noise=cfg.accel_noise,
             gate_chi2=cfg.innovation_gate_chi2, reinit_after=cfg.reinit_after,
-            max_gap_s=cfg.max_gap_s, tentative_coast_s=cfg.tentative_coast_s))
+            max_gap_s=cfg.max_gap_s, tentative_coast_s=cfg.tentative_coast_s,
+            lost_after_s=max(cfg.publish_coast_s, 0.3)))
         self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
         self._strong_views = min(3, num_c)
         self._noise_views = min(3, num_c)         # 2-view residuals say little about noise
@@ -277,10 +278,13 @@ class Fusion:
 
         def can_birth(rows: np.ndarray) -> np.ndarray:
             # only for poses left unmatched: inside the shared field of view, well supported
-            in_view = self.cameras_in_view(tri.joints[rows])
-            views = (members[rows] >= 0).sum(axis=1)
-            return (in_view >= self._birth_views) \
-                & (views >= self.config.min_birth_view_ratio * in_view)
+            # by the cameras of this set that should see it (a camera whose message missed
+            # the set cannot have seen anyone)
+            inside = self.cameras_in_view(tri.joints[rows], per_camera=True)     # [N, C]
+            present = np.array([n in views for n in self.camera_names])
+            views_ = (members[rows] >= 0).sum(axis=1)
+            return (inside.sum(axis=1) >= self._birth_views) \
+                & (views_ >= self.config.min_birth_view_ratio * (inside & present).sum(axis=1))
 
         def strong(rows: np.ndarray) -> np.ndarray:
             # confirmed at once: enough joints triangulated from min(3, cameras) views
@@ -456,8 +460,8 @@ class Fusion:
                 flip = mirrored < cfg.swap_ratio * cost
                 cost = np.where(flip, mirrored, cost)
             depth = np.nanmedian(np.where(front, z, np.nan), axis=1)
-        unseen = np.maximum(stamp - tr.last_observed[tracks], 0.0)
-        gate_m = cfg.tracking_gate_m + cfg.tracking_gate_growth_mps * unseen
+        since = np.maximum(stamp - tr.last_matched[tracks], 0.0)
+        gate_m = cfg.tracking_gate_m + cfg.tracking_gate_growth_mps * since
         gate = np.where(np.isfinite(depth), gate_m / np.where(np.isfinite(depth), depth, 1.0)
                         + 3 * self.noise_norm, -1.0)
         rows, cols = gated_assignment(cost, gate[:, None])
@@ -587,8 +591,12 @@ class Fusion:
             info['reprojection_error_px'] = float(np.median(err)) if err.size else float('nan')
         return info
 
-    def cameras_in_view(self, poses: np.ndarray) -> np.ndarray:
-        """Count, per pose ``[K, J, 3]``, the cameras whose image contains its joint centroid."""
+    def cameras_in_view(self, poses: np.ndarray, per_camera: bool = False) -> np.ndarray:
+        """
+        Count, per pose ``[K, J, 3]``, the cameras whose image contains its joint centroid.
+
+        ``per_camera``: return the ``[K, C]`` mask instead of the count.
+        """
         centre = centroid(poses)                                            # [K, 3]
         cam = centre[:, None, None, :] @ self._projections[:, :, :3].transpose(0, 2, 1)
         cam = cam[:, :, 0] + self._projections[:, :, 3]                    # [K, C, 3]
@@ -597,7 +605,7 @@ class Fusion:
             b = self._bounds
             inside = (cam[..., 2] > 0) & (x >= b[:, 0]) & (x <= b[:, 1]) & (y >= b[:, 2]) \
                 & (y <= b[:, 3])
-        return inside.sum(axis=1)
+        return inside if per_camera else inside.sum(axis=1)
 
     # ------------------------------------------------------------------ reconstruction
     def _warn(self, key: str, message: str) -> None:

@@ -40,6 +40,9 @@ from scipy.ndimage import gaussian_filter1d
 _MISSING, _TRIANGULATED, _PREDICTED = (np.uint8(s) for s in (
     JointState.MISSING, JointState.TRIANGULATED, JointState.PREDICTED))
 _XYZ = np.ones(3)          # sums over x, y, z as a product with ones (cheaper than .sum(-1))
+#: Share of a joint's velocity along a camera ray kept by a view of that camera (see
+#: ``JointKalman.update_rays``).
+VIEW_VELOCITY_KEEP = 0.5
 
 
 @dataclasses.dataclass
@@ -201,23 +204,22 @@ class JointKalman:
         three axes' (two shrink, one does not), so repeated views of one camera do not make
         the depth look known. Only live joints are updated (a ray cannot place a new joint).
 
-        A stamp older than a joint's last update (a late message) is an out-of-sequence
-        observation: the residual is taken at the joint retrodicted to ``stamp`` and the
-        correction applied to the current estimate (the one-step approximation); the
-        joint's time stays where it was.
+        A joint updated after ``stamp`` (a late message) is left alone: retrodicted with a
+        velocity that lags, the residual pulls the joint back towards where the person was
+        (measured: a one-step out-of-sequence update made the joints worse), so a late view
+        counts where it is the newest news, e.g. for joints held or tracks coasting.
         """
         rows = np.asarray(rows, dtype=np.int64)
         x, v, t = self.x[rows], self.v[rows], self.t[rows]
         count = self.count[rows]
         dt = stamp - t
         seen = np.isfinite(direction[..., 0])
-        live = (count > 0) & (dt <= self.max_gap_s + 1e-9) & seen
+        live = (count > 0) & (dt >= 0) & (dt <= self.max_gap_s + 1e-9) & seen
         dt = np.where(live, dt, 0.0)
-        back = np.abs(dt)               # prediction or retrodiction: uncertainty grows either way
         q = self.q
-        qdt = q * back
-        pxv = self.p_xv[rows] + back * (self.p_vv[rows] + qdt / 2)
-        pxx = self.p_xx[rows] + back * (self.p_xv[rows] + pxv - qdt * back / 6)
+        qdt = q * dt
+        pxv = self.p_xv[rows] + dt * (self.p_vv[rows] + qdt / 2)
+        pxx = self.p_xx[rows] + dt * (self.p_xv[rows] + pxv - qdt * dt / 6)
         pvv = self.p_vv[rows] + qdt
         xp = x + v * dt[..., None]
         with np.errstate(invalid='ignore'):
@@ -230,14 +232,18 @@ class JointKalman:
             accept = live & (depth > 0) & (d2 <= gate_chi2)
             k1, k2 = pxx / s, pxv / s
         a3 = accept[..., None]
-        base = np.where((dt >= 0)[..., None], xp, x)
-        self.x[rows] = np.where(a3, base + k1[..., None] * resid, x)
-        self.v[rows] = np.where(a3, v + k2[..., None] * resid, v)
+        self.x[rows] = np.where(a3, xp + k1[..., None] * resid, x)
+        # across the ray the velocity learns as from any observation; along it a view says
+        # nothing, and a velocity left there would carry the joint along the ray unchecked:
+        # that component decays with each view instead
+        along = (v * direction) @ _XYZ
+        v_new = v + k2[..., None] * resid - (1 - VIEW_VELOCITY_KEEP) * along[..., None] * direction
+        self.v[rows] = np.where(a3, v_new, v)
         two_thirds = 2.0 / 3.0
         self.p_xx[rows] = np.where(accept, pxx * (1 - two_thirds * k1), self.p_xx[rows])
         self.p_xv[rows] = np.where(accept, pxv * (1 - two_thirds * k1), self.p_xv[rows])
         self.p_vv[rows] = np.where(accept, pvv - two_thirds * k2 * pxv, self.p_vv[rows])
-        self.t[rows] = np.where(accept, np.maximum(t, stamp), t)
+        self.t[rows] = np.where(accept, stamp, t)
         self.count[rows] = np.where(accept, count + 1, count)
         point = np.where(a3, xp + resid, np.nan)
         return RayUpdate(accepted=accept, point=point, variance=np.where(accept, r, np.nan))

@@ -36,13 +36,15 @@ cameras whose inference finishes at different times lose no set:
   two of its images, e.g. replaced by a newer image while its model was busy). A set waits
   for no camera whose announced gap holds its window, so it goes as soon as its last real
   message arrives instead of after ``max_wait``.
-* The slop adapts to the cameras: each camera's frame period is the median of its recent
-  stamp steps, and the slop used is at most half of the shortest period (a wider slop would
-  merge consecutive frames of a camera and drop every other one). ``slop_s`` 0 means
+* The slop adapts to the cameras: each camera's frame period is the lower quartile of its
+  recent stamp steps (robust to frames missing at random), and the slop used is at most
+  half of the shortest period (a wider slop would merge consecutive frames of a camera and
+  drop every other one). ``slop_s`` 0 means
   "half the frame period"; a configured ``slop_s`` wider than that is narrowed and
   ``slop_note`` says so (the node logs it naming the parameter ``sync.slop_s``).
 * A message whose stamp is not newer than ``pivot + slop`` of the last decided pivot arrives
-  too late for its set: it is dropped and counted as ``late``.
+  too late for its set: it is counted as ``late`` and handed back (``AddResult.kind``), so
+  the caller can still update its tracks with it (fusion_node does, ``Fusion.update_view``).
 * The wait adapts to the rig: the arrival spread of each set's messages (arrival minus the
   arrival of the set's first message, on the arrival clock, late messages included) is kept
   for the recent messages, and the wait used is ``max(max_wait_s, 1.3 x p95 spread)``, at
@@ -68,7 +70,6 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 import itertools
 import math
-import statistics
 import time
 from typing import Any, Deque, Dict, Iterable, List, Optional, Sequence, Tuple
 
@@ -183,7 +184,7 @@ class CameraSyncStats:
     latest_stamp_ns: Optional[int] = None
     last_seen_ns: Optional[int] = None       # newest stamp seen (accepted or not): rate, gaps
     last_arrival_ns: Optional[int] = None
-    period_ns: Optional[int] = None          # median of the recent stamp steps
+    period_ns: Optional[int] = None          # lower quartile of the recent stamp steps
     usual_period_ns: Optional[int] = None    # shortest sustained period seen (usual rate)
     offsets_ns: Deque[int] = field(default_factory=deque)  # stamp - set stamp, recent used
     steps_ns: Deque[int] = field(default_factory=lambda: deque(maxlen=PERIOD_WINDOW))
@@ -234,7 +235,10 @@ class CameraSyncStats:
                 self.lost += missed
         self.steps_ns.append(step)
         if len(self.steps_ns) >= PERIOD_MIN_STEPS:
-            self.period_ns = int(statistics.median(self.steps_ns))
+            # The lower quartile of the steps, not their median: with a third or more of a
+            # camera's frames missing (a CPU that cannot infer them all) the median step is
+            # two periods, and a slop of half that would merge consecutive instants.
+            self.period_ns = int(sorted(self.steps_ns)[len(self.steps_ns) // 4])
             if len(self.steps_ns) == PERIOD_WINDOW and (
                     self.usual_period_ns is None or self.period_ns < self.usual_period_ns):
                 self.usual_period_ns = self.period_ns

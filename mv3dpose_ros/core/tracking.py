@@ -79,6 +79,7 @@ class TrackerConfig:
     min_birth_joints: int = 6
     recovery_gate_m: float = 0.5        # second-pass gate for tracks and poses left unmatched
     max_predict_s: float = 1.0          # motion extrapolated at most this long (then held)
+    lost_after_s: float = 0.5           # tracks unobserved longer match only what is left
     tentative_coast_s: float = 0.0      # a TENTATIVE track survives sets without it this long
     # per-joint Kalman filters (core.smoothing.JointKalman)
     accel_noise: float = 2.0            # white acceleration noise density [m^2/s^3]
@@ -101,6 +102,7 @@ class Tracks:
     last_observed: np.ndarray   # [T] s
     first_seen_ns: np.ndarray   # [T] int64 ns, the same stamps exactly
     last_observed_ns: np.ndarray    # [T] int64 ns
+    last_matched: np.ndarray    # [T] s, last stamp a 3D pose matched (not a single view)
     hits: np.ndarray            # [T] observations
     missed: np.ndarray          # [T] consecutive updates without observation
 
@@ -111,7 +113,7 @@ class Tracks:
                    pose=np.zeros((0, num_joints, 3)), velocity=np.zeros((0, 3)),
                    first_seen=np.zeros(0), last_observed=np.zeros(0),
                    first_seen_ns=np.zeros(0, dtype=np.int64),
-                   last_observed_ns=np.zeros(0, dtype=np.int64),
+                   last_observed_ns=np.zeros(0, dtype=np.int64), last_matched=np.zeros(0),
                    hits=np.zeros(0, dtype=np.int64), missed=np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
@@ -228,21 +230,35 @@ class Tracker:
         if num_t and num_d:
             cost = pose_distance(tr.predicted(stamp, cfg.predict, cfg.max_predict_s), poses,
                                  cfg.min_shared_joints)
-            gate = np.where(alive, cfg.gate_m + cfg.gate_growth_mps * unseen, -1.0)
-            rows, cols = gated_assignment(cost, gate[:, None])
-            det[rows] = cols
-            if cfg.recovery_gate_m > 0 and len(rows) < min(num_t, num_d):
-                # Second chance for the leftovers with a wider gate, before new tracks are
-                # started: one noisy 3D pose should not fork a person's track.
-                free_t = np.nonzero((det < 0) & alive)[0]
-                taken = np.zeros(num_d, dtype=bool)
+            # The gate grows with the time since a 3D pose last matched: single views keep a
+            # track alive but leave its depth uncertain.
+            since = np.maximum(stamp - tr.last_matched, 0.0)
+            gate = np.where(alive, cfg.gate_m + cfg.gate_growth_mps * since, -1.0)
+            wide = np.maximum(gate, cfg.recovery_gate_m) if cfg.recovery_gate_m > 0 else None
+            # A cascade: tracks seen lately first, with their gate and then (one noisy 3D pose
+            # should not fork a person's track) the recovery gate; tracks lost for longer only
+            # take what is left, so a stale track with a wide gate never takes a person that
+            # a fresh track follows.
+            recent = unseen <= cfg.lost_after_s + 1e-9
+            passes = [(alive & recent, gate, False), (alive & recent, wide, True),
+                      (alive & ~recent, gate, True), (alive & ~recent, wide, True)]
+            taken = np.zeros(num_d, dtype=bool)
+            for group, limit, second in passes:
+                if limit is None:
+                    continue
+                free_t = np.nonzero(group & (det < 0))[0]
+                if not len(free_t) or taken.all():
+                    continue
+                if len(free_t) == num_t and not taken.any():
+                    rows, cols = gated_assignment(cost, limit[:, None])
+                    rows, cols = free_t[rows], cols
+                else:
+                    free_d = np.nonzero(~taken)[0]
+                    r, c = gated_assignment(cost[np.ix_(free_t, free_d)], limit[free_t, None])
+                    rows, cols = free_t[r], free_d[c]
+                det[rows] = cols
                 taken[cols] = True
-                free_d = np.nonzero(~taken)[0]
-                if len(free_t) and len(free_d):
-                    r2, c2 = gated_assignment(cost[np.ix_(free_t, free_d)],
-                                              np.maximum(gate[free_t, None], cfg.recovery_gate_m))
-                    det[free_t[r2]] = free_d[c2]
-                    recovered[free_t[r2]] = True
+                recovered[rows] = second
         hit = det >= 0
         all_hit = bool(hit.all())
         if num_t:
@@ -356,6 +372,7 @@ class Tracker:
                       last_observed=np.full(n, stamp),
                       first_seen_ns=np.full(n, stamp_ns, dtype=np.int64),
                       last_observed_ns=np.full(n, stamp_ns, dtype=np.int64),
+                      last_matched=np.full(n, stamp),
                       hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
 
     def _observe(self, hit: np.ndarray, stamp: float, stamp_ns: int,
@@ -366,11 +383,13 @@ class Tracker:
             tr.hits = tr.hits + 1
             tr.last_observed = np.full(len(tr), stamp)
             tr.last_observed_ns = np.full(len(tr), stamp_ns, dtype=np.int64)
+            tr.last_matched = np.full(len(tr), stamp)
             tr.missed = np.zeros(len(tr), dtype=np.int64)
         else:
             tr.hits = tr.hits + hit
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
             tr.last_observed_ns = np.where(hit, stamp_ns, tr.last_observed_ns)
+            tr.last_matched = np.where(hit, stamp, tr.last_matched)
         confirm = (tr.state == _COASTING) | (tr.hits >= self.config.confirm_hits)
         if not all_hit:
             confirm &= hit
