@@ -130,6 +130,8 @@ class FusionConfig:
     #                                         update existing tracks as rays (False: only
     #                                         joints triangulated in one set do, the paper's)
     view_min_joints: int = 3                # joints a view must update to observe a track
+    view_only_s: float = 1.0                # single views keep a track observed this long
+    #                                         after its last triangulated match (depth drifts)
     tentative_coast_s: float = 0.25         # a TENTATIVE track outlives sets without it this
     #                                         long (sparse views: not every set sees a birth)
     view_gate_chi2: float = 13.8            # ray innovation gate (chi-square, 2 dof, 99.9 %)
@@ -142,7 +144,7 @@ class FusionConfig:
                         'min_birth_view_ratio', 'tracking_gate_growth_mps',
                         'tracking_recovery_gate_m', 'max_coast_s', 'max_gap_s',
                         'confirm_at_birth_ratio', 'publish_coast_s', 'noise_gain',
-                        'tentative_coast_s')
+                        'tentative_coast_s', 'view_only_s')
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
                         'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
                         'min_birth_cameras_in_view', 'reinit_after', 'view_min_joints')
@@ -343,7 +345,8 @@ class Fusion:
         if flip.any():
             pts[flip] = pts[flip][:, self.layout.flip_permutation]
         res = self._ray_update(c, cand[rows], pts, stamp)
-        observed = cand[rows][res.accepted.sum(axis=1) >= self.config.view_min_joints]
+        enough = res.accepted.sum(axis=1) >= self.config.view_min_joints
+        observed = cand[rows][enough & self._depth_known(stamp)[cand[rows]]]
         self.tracker.observe_views(observed, stamp, stamp_ns)
         self.tracker.refresh(cand[rows])
         self.counts['late_views_used'] += 1
@@ -420,7 +423,7 @@ class Fusion:
         updated = np.nonzero(rays.accepted.any(axis=1))[0]
         if not len(updated):
             return rays
-        enough = rays.accepted.sum(axis=1) >= cfg.view_min_joints
+        enough = (rays.accepted.sum(axis=1) >= cfg.view_min_joints) & self._depth_known(stamp)
         self.tracker.observe_views(np.nonzero(enough & ~has)[0], stamp, stamp_ns)
         self.tracker.refresh(updated)
         self.counts['view_updates'] += len(updated)
@@ -431,6 +434,18 @@ class Fusion:
         kal.variance[acc] = filt.p_xx[acc]
         kal.accepted = kal.accepted | acc
         return rays
+
+    def _depth_known(self, stamp: float) -> np.ndarray:
+        """
+        Tell, per track, whether single views may still count as observing it at ``stamp``.
+
+        A view fixes a person across its ray, not along it: after ``view_only_s`` without a
+        3D match the depth may be off by a walk, so views still update the joints but no
+        longer keep the track published (it coasts, keeps its id, and is found again by
+        the next triangulated pose).
+        """
+        tr = self.tracker.tracks
+        return stamp - tr.last_matched <= self.config.view_only_s + 1e-9
 
     def _match_view(self, cam: int, tracks: np.ndarray, poses: np.ndarray, stamp: float
                     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -803,6 +818,7 @@ class Fusion:
             r = np.where(accepted, r, np.nan)
             num_views = np.where(accepted, num_views, 0)
             err = np.where(accepted, err, np.nan)
+        only = None
         if rays is not None:             # joints only single views updated: their rays
             only = rays.accepted & ~np.isfinite(r)
             z = np.where(only[..., None], rays.point, z)
@@ -818,6 +834,12 @@ class Fusion:
             conf_last = np.where(observed, conf_obs, conf_prev)
         self._confidence = conf_last
         state, joint_var = kal.state, kal.variance
+        if only is not None and only.any():
+            # a ray leaves the depth open: as far as the person may have walked along it
+            # since the last 3D match (a third of it per axis; the filter's isotropic
+            # variance only knows the two axes across the ray)
+            drift = cfg.tracking_gate_growth_mps * (stamp - tr.last_matched)
+            joint_var = np.where(only, joint_var + (drift * drift / 3)[:, None], joint_var)
         if cfg.smoothing == 'causal':
             joints = kal.joints
         else:                            # accepted triangulations, held joints in gaps

@@ -40,9 +40,6 @@ from scipy.ndimage import gaussian_filter1d
 _MISSING, _TRIANGULATED, _PREDICTED = (np.uint8(s) for s in (
     JointState.MISSING, JointState.TRIANGULATED, JointState.PREDICTED))
 _XYZ = np.ones(3)          # sums over x, y, z as a product with ones (cheaper than .sum(-1))
-#: Share of a joint's velocity along a camera ray kept by a view of that camera (see
-#: ``JointKalman.update_rays``).
-VIEW_VELOCITY_KEEP = 0.5
 
 
 @dataclasses.dataclass
@@ -233,12 +230,9 @@ class JointKalman:
             k1, k2 = pxx / s, pxv / s
         a3 = accept[..., None]
         self.x[rows] = np.where(a3, xp + k1[..., None] * resid, x)
-        # across the ray the velocity learns as from any observation; along it a view says
-        # nothing, and a velocity left there would carry the joint along the ray unchecked:
-        # that component decays with each view instead
-        along = (v * direction) @ _XYZ
-        v_new = v + k2[..., None] * resid - (1 - VIEW_VELOCITY_KEEP) * along[..., None] * direction
-        self.v[rows] = np.where(a3, v_new, v)
+        # along the ray the velocity keeps what the last triangulations taught it (decaying
+        # it there was measured worse: a walking person's depth then lags behind)
+        self.v[rows] = np.where(a3, v + k2[..., None] * resid, v)
         two_thirds = 2.0 / 3.0
         self.p_xx[rows] = np.where(accept, pxx * (1 - two_thirds * k1), self.p_xx[rows])
         self.p_xv[rows] = np.where(accept, pxv * (1 - two_thirds * k1), self.p_xv[rows])
