@@ -29,9 +29,9 @@ after every camera answered, and ``/diagnostics``.
 Who is who needs no ground truth: the man is the only one seen by more than two cameras, and
 the clip loops, so his root at video frame ``f`` is the median root of the skeletons
 triangulated from >= 3 cameras at that frame over the run. A confirmed skeleton within
-``PERSON_RADIUS_M`` of it is the man (on the runs here they were all within 0.2 m, every
-other skeleton 0.6 m or more away), one over ``BYSTANDER_MIN_M`` away is the bystander
-(3.4 m away), anything between a ghost (reported, not asserted).
+``PERSON_RADIUS_M`` of it is the man (on the runs here his were within 0.3 m, every other
+skeleton 0.6 m or more away), one over ``BYSTANDER_MIN_M`` away is the bystander (3.4 m
+away), anything between a ghost (reported, not asserted).
 
 Proven (asserted):
 
@@ -49,12 +49,14 @@ after the first 20 s (the issue's target is p95 <= 400 ms), the tracks rate, ids
 identity figures of ``mv3dpose_ros.eval.identity``, and the /diagnostics counts of single-view
 updates, late messages used, recoveries and merges.
 
-The issue's "one confirmed id for the person over 60 s" is the second test, expected to fail:
-at each wrap of the loop the man jumps back 0.7 m in one 0.1 s frame (he walks from x -1.4 m
-to -0.7 m during the clip), and the tracker gives him a new id (or one of its lost ids) there.
+The issue's "one confirmed id for the person over 60 s" is the second test, expected to fail
+(xfail): at each wrap of the loop the man jumps back 0.77 m in one 0.1 s frame (he walks from
+x -1.45 m to -0.68 m during the clip), beyond the tracker's gates (``recovery_gate_m`` 0.5 m),
+so he gets a new id there, one per pass of the clip.
 """
 
 import collections
+import json
 import math
 import os
 import sys
@@ -79,7 +81,7 @@ MEASURE_S = 60.0             # after every camera answered
 LATENCY_SKIP_S = 20.0        # latency figures after this much of the measured minute
 WARMUP_S = 5.0               # identity judged after this much (first confirmation: ~1 s)
 ANSWER_TIMEOUT_S = 60.0      # start to every camera's first persons_2d (9 s here)
-PERSON_RADIUS_M = 0.4        # the man's skeletons: <= 0.2 m from his reference; others >= 0.6
+PERSON_RADIUS_M = 0.4        # the man's skeletons: <= 0.3 m from his reference; others >= 0.6
 BYSTANDER_MIN_M = 2.0        # the bystander: 3.4 m from the man
 LOOP_MIN_SKELETONS = 30      # a pass of the clip (100 instants) judged with this many of his
 PASS_SHARE = 0.9             # one id carries this share of his skeletons within a pass
@@ -165,7 +167,8 @@ def video_rig(shared_data, model, tmp_path_factory):
         probe.close()
     return {'messages': messages, 'status': status, 't_start': t_start, 't_ready': t_ready,
             't_end': t_end, 'frames': frames.pop(), 'code': code,
-            'log': log_path.read_text(), 'published': bench_rig.published_counts(pub_logs)}
+            'log': log_path.read_text(), 'published': bench_rig.published_counts(pub_logs),
+            'folder': tmp}
 
 
 def _pct(values: List[float], p: float) -> float:
@@ -270,6 +273,19 @@ def _report(run: dict, res: dict) -> str:
             f'(> {BYSTANDER_MIN_M:g} m): {len(res["bystander"])} skeletons, ids '
             f'{dict(collections.Counter(s["id"] for _, _, s in res["bystander"]))}',
         ]
+    kinds = {}
+    for kind in ('man', 'ghosts', 'bystander'):
+        for _, stamp, s in res.get(kind, []):
+            kinds.setdefault(s['id'], collections.Counter())[kind] += 1
+    for i in sorted(kinds):
+        seen = [(stamp, s) for stamp, _, sk in window for s in sk
+                if s['id'] == i and s['state'] == 1]
+        cams = collections.Counter(len(s['cameras']) for _, s in seen)
+        lines.append(
+            f'  id {i}: confirmed {(seen[0][0] - t_ready) / NS:.1f}-'
+            f'{(seen[-1][0] - t_ready) / NS:.1f} s, {dict(kinds[i])}, median root '
+            f'{np.round(np.median([s["root"] for _, s in seen], axis=0), 2).tolist()}, '
+            f'cameras per update {dict(sorted(cams.items()))}')
     tracking = run['status'].get('fusion_node: tracking', {})
     lines.append('fusion_node tracking: ' + ', '.join(
         f'{k} {tracking.get(k, "?")}' for k in (
@@ -300,7 +316,14 @@ def _report(run: dict, res: dict) -> str:
 def analysed(video_rig):
     res = _analyse(video_rig)
     res['report'] = _report(video_rig, res)
-    print('\n' + res['report'])
+    folder = video_rig['folder']
+    (folder / 'report.txt').write_text(res['report'] + '\n')
+    with open(folder / 'tracks.jsonl', 'w') as f:      # for a look at a failure
+        for stamp, arr, skeletons in video_rig['messages']:
+            f.write(json.dumps({'stamp_ns': stamp, 'receipt_ns': arr, 'skeletons': [
+                {'id': s['id'], 'state': s['state'], 'root': s['root'].round(3).tolist(),
+                 'source': s['source'], 'cameras': s['cameras']} for s in skeletons]}) + '\n')
+    print(f'\n{res["report"]}\n(report, tracks.jsonl and the process logs in {folder})')
     return res
 
 
