@@ -295,7 +295,7 @@ class Fusion:
 
         self._estimate_noise(tri)
         variance = self.measurement_variance(tri)
-        merged = self._merge_duplicates()
+        merged = self._merge_duplicates() if self._duplicates else None
         tr = self.tracker.tracks
         lost = tr.ids[stamp - tr.last_observed > cfg.publish_coast_s + 1e-9]
         upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns)
@@ -308,7 +308,9 @@ class Fusion:
             self.counts['recovered'] += int(np.isin(back, lost).sum())
         out = self._outputs(upd, tri, members, variance, stamp, rays)
         self._count_duplicates(rays, upd, members)
-        return out + tombs + self._tombstones(merged) + self._tombstones(upd.deleted)
+        if merged is not None:
+            tombs += self._tombstones(merged)
+        return out + tombs + self._tombstones(upd.deleted)
 
     def update_view(self, camera: str, poses: np.ndarray, stamp: float,
                     stamp_ns: Optional[int] = None) -> int:
@@ -338,7 +340,7 @@ class Fusion:
         cand = np.nonzero(tr.state != _TENTATIVE_TRACK)[0]
         if hi == lo or not len(cand):
             return 0
-        rows, cols, flip = self._match_view(c, cand, x[lo:hi], stamp)
+        rows, cols, flip = self._match_view(c, cand, x[lo:hi], stamp, self._predicted(stamp))
         if not len(rows):
             return 0
         pts = x[lo:hi].take(cols, axis=0)
@@ -379,16 +381,30 @@ class Fusion:
         used[assigned[from_member]] = True
         eligible = tr.state != _TENTATIVE_TRACK      # a single view confirms no new track
         flipped = np.zeros((num_t, len(self.cameras)), dtype=bool)
+        pred = None
         for c, (lo, hi) in enumerate(zip(offsets, offsets[1:])):
-            if hi == lo:
+            if hi == lo or used[lo:hi].all():
                 continue
             free = lo + np.nonzero(~used[lo:hi])[0]
             cand = np.nonzero(eligible & (assigned[:, c] < 0))[0]
-            if len(free) and len(cand):
-                rows, cols, flip = self._match_view(c, cand, x.take(free, axis=0), stamp)
+            if len(cand):
+                pred = self._predicted(stamp) if pred is None else pred
+                rows, cols, flip = self._match_view(c, cand, x.take(free, axis=0), stamp, pred)
                 assigned[cand[rows], c] = free[cols]
                 flipped[cand[rows], c] = flip
         if not (assigned >= 0).any():
+            return None
+        pts = x.take(assigned, axis=0)                  # [T, C, J, 3]; -1: the missing row
+        if flipped.any():
+            pts[flipped] = pts[flipped][:, self._flip]
+        vis = np.isfinite(pts[..., 0])                  # [T, C, J]
+        # a member view's joint counts only where no other view of the 3D pose saw it:
+        # triangulated, it is in the 3D measurement already; seen by several views and not
+        # triangulated, the views disagreed (the reprojection gate or the bone check)
+        seen = (vis & from_member[..., None]).sum(axis=1)                   # [T, J]
+        spent = upd.filtered.accepted | (seen > 1)
+        use = vis & ~(from_member[..., None] & spent[:, None, :])
+        if not use.any():
             return None
         num_j = self.layout.num_joints
         rays = _Rays(accepted=np.zeros((num_t, num_j), dtype=bool),
@@ -396,24 +412,10 @@ class Fusion:
                      variance=np.full((num_t, num_j), np.nan),
                      views=np.zeros((num_t, num_j), dtype=np.int64),
                      cameras=assigned >= 0)
-        triangulated = upd.filtered.accepted
-        seen = np.isfinite(x.take(np.where(from_member, assigned, -1), axis=0)[..., 0]
-                           ).sum(axis=1)                        # [T, J] member views seeing
-        for c in range(len(self.cameras)):
-            rows = np.nonzero(assigned[:, c] >= 0)[0]
-            if not len(rows):
-                continue
-            pts = x.take(assigned[rows, c], axis=0)
-            flip = flipped[rows, c]
-            if flip.any():
-                pts[flip] = pts[flip][:, self._flip]
-            # a member view's joint counts only where no other view of the 3D pose saw it:
-            # triangulated, it is in the 3D measurement already; seen by several views and
-            # not triangulated, the views disagreed (the reprojection gate or bone check)
-            skip = from_member[rows, c][:, None] & (triangulated[rows] | (seen[rows] > 1))
-            if skip.any():
-                pts = np.where(skip[..., None], np.nan, pts)
-            res = self._ray_update(c, rows, pts, stamp)
+        for c in np.nonzero(use.any(axis=(0, 2)))[0].tolist():
+            rows = np.nonzero(use[:, c].any(axis=1))[0]
+            res = self._ray_update(c, rows, np.where(use[rows, c][..., None], pts[rows, c],
+                                                     np.nan), stamp)
             acc = res.accepted
             rays.views[rows] += acc
             first = acc & ~rays.accepted[rows]
@@ -447,8 +449,13 @@ class Fusion:
         tr = self.tracker.tracks
         return stamp - tr.last_matched <= self.config.view_only_s + 1e-9
 
-    def _match_view(self, cam: int, tracks: np.ndarray, poses: np.ndarray, stamp: float
-                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _predicted(self, stamp: float) -> np.ndarray:
+        """Return the ``[T, J, 3]`` poses of the tracks predicted to ``stamp``."""
+        return self.tracker.tracks.predicted(stamp, self.config.tracking_prediction,
+                                             self.tracker.config.max_predict_s)
+
+    def _match_view(self, cam: int, tracks: np.ndarray, poses: np.ndarray, stamp: float,
+                    predicted: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
         Match normalised 2D poses ``[P, J, 3]`` of camera ``cam`` to tracks ``[N]`` (rows).
 
@@ -456,12 +463,12 @@ class Fusion:
         joints projected into the camera and the pose's, over at least ``min_shared_joints``
         joints; a mirrored pose (left/right swapped by the detector) is taken when it fits
         ``swap_ratio`` times better. The gate is the 3D tracking gate (grown with the time
-        the track was not seen) at the track's depth, plus 3 sigma of 2D noise. Returns
-        ``(rows into tracks, rows into poses, mirrored)``.
+        since a 3D pose matched the track) at the track's depth, plus 3 sigma of 2D noise.
+        ``predicted`` are all tracks' poses at ``stamp``. Returns ``(rows into tracks, rows
+        into poses, mirrored)``.
         """
         cfg, tr = self.config, self.tracker.tracks
-        pred = tr.predicted(stamp, cfg.tracking_prediction,
-                            self.tracker.config.max_predict_s)[tracks]          # [N, J, 3]
+        pred = predicted[tracks]                                                # [N, J, 3]
         R, centre = self._rotations[cam], self._centres[cam]
         local = (pred - centre) @ R.T                                           # [N, J, 3]
         z = local[..., 2]
@@ -505,6 +512,15 @@ class Fusion:
         if len(live) < 2 or cfg.merge_distance_m <= 0:
             self._duplicates.clear()
             return
+        # the centres first (cheap): mean joint distances below the merge distance need
+        # centres within about as much
+        centre = centroid(tr.pose[live])
+        d = centre[:, None] - centre[None]
+        with np.errstate(invalid='ignore'):
+            near = (d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2
+        if not (near & _upper_triangle(len(live))).any():
+            self._duplicates.clear()
+            return
         dist = pose_distance(tr.pose[live], tr.pose[live], cfg.min_shared_joints)
         close = (dist < cfg.merge_distance_m) & _upper_triangle(len(live))
         if not close.any():
@@ -526,10 +542,8 @@ class Fusion:
                 alike[key] = self._duplicates.get(key, 0) + 1
         self._duplicates = alike
 
-    def _merge_duplicates(self) -> Tracks:
-        """Delete the younger of each pair alike for ``_DUPLICATE_FRAMES`` steps."""
-        if not self._duplicates:
-            return Tracks.empty(self.layout.num_joints)
+    def _merge_duplicates(self) -> Optional[Tracks]:
+        """Delete the younger of each pair alike for ``_DUPLICATE_FRAMES`` steps (or None)."""
         tr = self.tracker.tracks
         row = {tid: r for r, tid in enumerate(tr.ids.tolist())}
         drop = set()
@@ -540,7 +554,7 @@ class Fusion:
                 drop.add(b if older == a else a)
         self._duplicates = {k: n for k, n in self._duplicates.items() if not set(k) & drop}
         if not drop:
-            return Tracks.empty(self.layout.num_joints)
+            return None
         rows = np.array(sorted(row[d] for d in drop))
         keep = np.ones(len(tr), dtype=bool)
         keep[rows] = False

@@ -240,8 +240,10 @@ class Tracker:
             # take what is left, so a stale track with a wide gate never takes a person that
             # a fresh track follows.
             recent = unseen <= cfg.lost_after_s + 1e-9
-            passes = [(alive & recent, gate, False), (alive & recent, wide, True),
-                      (alive & ~recent, gate, True), (alive & ~recent, wide, True)]
+            lost = alive & ~recent
+            passes = [(alive & recent, gate, False), (alive & recent, wide, True)]
+            if lost.any():
+                passes += [(lost, gate, True), (lost, wide, True)]
             taken = np.zeros(num_d, dtype=bool)
             for group, limit, second in passes:
                 if limit is None:
