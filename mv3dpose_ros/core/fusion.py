@@ -53,7 +53,8 @@ from mv3dpose_ros.core.association import (associate_stacked, camera_order,
                                            epipolar_norm_coefficients, gated_assignment)
 from mv3dpose_ros.core.camera import Camera, essential_matrices
 from mv3dpose_ros.core.skeleton import get_layout, Layout
-from mv3dpose_ros.core.tracking import centroid, pose_distance, Tracker, TrackerConfig, Tracks
+from mv3dpose_ros.core.tracking import (centroid, median_joint_distance, Tracker, TrackerConfig,
+                                        Tracks)
 from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, dlt_basis,
                                              swap_pairs, swapped_views, triangulate_robust,
                                              Triangulation)
@@ -74,6 +75,9 @@ _TENTATIVE_TRACK = np.int8(TrackState.TENTATIVE)
 _COASTING_TRACK = np.int8(TrackState.COASTING)
 # Frames two tracks must look like one person (close, no shared camera) before they merge.
 _DUPLICATE_FRAMES = 3
+#: A single view's pose may be at most this much larger or smaller than the track projected
+#: into its camera (about +-35 % in depth): a bystander on the same line of sight is not.
+VIEW_SCALE_RATIO = 1.4
 # Extra per-axis variance of a root taken from the body instead of the hips [m^2]: (15 cm)^2.
 _BODY_ROOT_VARIANCE = 0.15 ** 2
 
@@ -216,7 +220,8 @@ class Fusion:
             min_birth_joints=cfg.min_birth_joints, accel_noise=cfg.accel_noise,
             gate_chi2=cfg.innovation_gate_chi2, reinit_after=cfg.reinit_after,
             max_gap_s=cfg.max_gap_s, tentative_coast_s=cfg.tentative_coast_s,
-            lost_after_s=max(cfg.publish_coast_s, 0.3)))
+            lost_after_s=max(cfg.publish_coast_s, 0.3),
+            confirm_views=max(2, min(3, num_c - 1))))
         self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
         self._strong_views = min(3, num_c)
         self._noise_views = min(3, num_c)         # 2-view residuals say little about noise
@@ -285,8 +290,15 @@ class Fusion:
             inside = self.cameras_in_view(tri.joints[rows], per_camera=True)     # [N, C]
             present = np.array([n in views for n in self.camera_names])
             views_ = (members[rows] >= 0).sum(axis=1)
-            return (inside.sum(axis=1) >= self._birth_views) \
+            ok = (inside.sum(axis=1) >= self._birth_views) \
                 & (views_ >= self.config.min_birth_view_ratio * (inside & present).sum(axis=1))
+            if ok.any() and len(self.tracker.tracks):
+                # a fragment of a tracked person (its views split from the rest by the
+                # association) is no one new: a track of it would be a duplicate
+                near = median_joint_distance(tri.joints[rows[ok]], self._predicted(stamp),
+                                             cfg.min_shared_joints)
+                ok[ok] = ~(near < cfg.merge_distance_m).any(axis=1)
+            return ok
 
         def strong(rows: np.ndarray) -> np.ndarray:
             # confirmed at once: enough joints triangulated from min(3, cameras) views
@@ -298,7 +310,8 @@ class Fusion:
         merged = self._merge_duplicates() if self._duplicates else None
         tr = self.tracker.tracks
         lost = tr.ids[stamp - tr.last_observed > cfg.publish_coast_s + 1e-9]
-        upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns)
+        upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns,
+                                  views=(members >= 0).sum(axis=1))
         rays = None
         if cfg.view_updates and len(self.tracker.tracks):
             rays = self._update_from_views(upd, members, stamp, stamp_ns)
@@ -481,7 +494,14 @@ class Fusion:
                 mirrored = _image_cost(proj, poses[:, self._flip, :2], cfg.min_shared_joints)
                 flip = mirrored < cfg.swap_ratio * cost
                 cost = np.where(flip, mirrored, cost)
-            depth = np.nanmedian(np.where(front, z, np.nan), axis=1)
+            depth = np.where(front, z, 0.0).sum(axis=1) / front.sum(axis=1)
+            # A pose of the right place but the wrong size is another person on the same
+            # line of sight (a bystander behind): its spread must match the projection's
+            scale = _spread_ratio(proj, np.where(flip[..., None, None], poses[:, self._flip, :2],
+                                                 poses[..., :2]) if flip.any() else
+                                  poses[..., :2])
+            cost = np.where((scale > 1 / VIEW_SCALE_RATIO) & (scale < VIEW_SCALE_RATIO), cost,
+                            np.inf)
         since = np.maximum(stamp - tr.last_matched[tracks], 0.0)
         gate_m = cfg.tracking_gate_m + cfg.tracking_gate_growth_mps * since
         gate = np.where(np.isfinite(depth), gate_m / np.where(np.isfinite(depth), depth, 1.0)
@@ -521,7 +541,7 @@ class Fusion:
         if not (near & _upper_triangle(len(live))).any():
             self._duplicates.clear()
             return
-        dist = pose_distance(tr.pose[live], tr.pose[live], cfg.min_shared_joints)
+        dist = median_joint_distance(tr.pose[live], tr.pose[live], cfg.min_shared_joints)
         close = (dist < cfg.merge_distance_m) & _upper_triangle(len(live))
         if not close.any():
             self._duplicates.clear()
@@ -782,7 +802,7 @@ class Fusion:
     def _merge(self, tri: Triangulation, members: np.ndarray):
         """Merge candidates closer than merge_distance_m seen by disjoint cameras; else NMS."""
         cfg = self.config
-        dist = pose_distance(tri.joints, tri.joints, cfg.min_shared_joints)
+        dist = median_joint_distance(tri.joints, tri.joints, cfg.min_shared_joints)
         close = (dist < cfg.merge_distance_m) & _upper_triangle(len(dist))
         if not close.any():
             return members, 0
@@ -952,6 +972,27 @@ class _Rays:
     variance: np.ndarray    # [T, J] its variance across the ray [m^2]
     views: np.ndarray       # [T, J] views that updated the joint
     cameras: np.ndarray     # [T, C] cameras whose pose went to the track as a single view
+
+
+def _spread_ratio(proj: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """
+    Return ``[N, P]`` size ratios of 2D poses ``[P, J, 2]`` (or ``[N, P, J, 2]``) to ``[N, J, 2]``.
+
+    The size is the RMS distance of the joints both have from their mean, so a pose whose
+    legs are hidden is compared with the projection's upper body only. NaN with < 2 shared.
+    """
+    det = poses if poses.ndim == 4 else np.broadcast_to(poses[None], (len(proj),) + poses.shape)
+    ref = np.broadcast_to(proj[:, None], det.shape)
+    ok = np.isfinite(det[..., 0]) & np.isfinite(ref[..., 0])             # [N, P, J]
+    n = ok.sum(axis=-1)[..., None]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        sizes = []
+        for pts in (det, ref):
+            pts = np.where(ok[..., None], pts, 0.0)
+            centred = pts - pts.sum(axis=-2)[..., None, :] / n[..., None]
+            sizes.append(np.sqrt((np.where(ok[..., None], centred, 0.0) ** 2).sum(axis=(-1, -2))
+                                 / n[..., 0]))
+        return np.where(n[..., 0] >= 2, sizes[0] / sizes[1], np.nan)
 
 
 def _image_cost(proj: np.ndarray, poses: np.ndarray, min_joints: int) -> np.ndarray:

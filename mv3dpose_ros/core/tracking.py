@@ -81,6 +81,7 @@ class TrackerConfig:
     max_predict_s: float = 1.0          # motion extrapolated at most this long (then held)
     lost_after_s: float = 0.5           # tracks unobserved longer match only what is left
     tentative_coast_s: float = 0.0      # a TENTATIVE track survives sets without it this long
+    confirm_views: int = 0              # views a matched pose must once have had to confirm
     # per-joint Kalman filters (core.smoothing.JointKalman)
     accel_noise: float = 2.0            # white acceleration noise density [m^2/s^3]
     init_speed_mps: float = 1.0         # prior std of a new joint's velocity (starts at 0)
@@ -103,6 +104,7 @@ class Tracks:
     first_seen_ns: np.ndarray   # [T] int64 ns, the same stamps exactly
     last_observed_ns: np.ndarray    # [T] int64 ns
     last_matched: np.ndarray    # [T] s, last stamp a 3D pose matched (not a single view)
+    support: np.ndarray         # [T] most views of a 3D pose matched (confirmation needs enough)
     hits: np.ndarray            # [T] observations
     missed: np.ndarray          # [T] consecutive updates without observation
 
@@ -114,6 +116,7 @@ class Tracks:
                    first_seen=np.zeros(0), last_observed=np.zeros(0),
                    first_seen_ns=np.zeros(0, dtype=np.int64),
                    last_observed_ns=np.zeros(0, dtype=np.int64), last_matched=np.zeros(0),
+                   support=np.zeros(0, dtype=np.int64),
                    hits=np.zeros(0, dtype=np.int64), missed=np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
@@ -179,6 +182,26 @@ def pose_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int = 3) -> n
     return np.where(np.isfinite(mean), mean, np.inf)
 
 
+def median_joint_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int = 3
+                          ) -> np.ndarray:
+    """
+    Return the ``[A, B]`` lower median distance of the joints two poses share.
+
+    ``a [A, J, 3]``, ``b [B, J, 3]`` with NaN for missing joints.
+
+    Robust where the mean is not: two noisy reconstructions of one person differ by a few
+    limbs a lot and by the rest a little. Inf with fewer than ``min_shared_joints`` shared.
+    """
+    d = a[:, None] - b[None]
+    diff = np.sqrt((d * d) @ _XYZ)                                  # [A, B, J], NaN if missing
+    ok = np.isfinite(diff)
+    n = ok.sum(axis=-1)
+    ordered = np.sort(np.where(ok, diff, np.inf), axis=-1)          # missing joints last
+    middle = np.maximum(n - 1, 0) // 2                              # the lower median
+    med = np.take_along_axis(ordered, middle[..., None], axis=-1)[..., 0]
+    return np.where(n >= min_shared_joints, med, np.inf)
+
+
 class Tracker:
     """Assign 3D poses to tracks over time, filter their joints and run their life cycle."""
 
@@ -205,7 +228,8 @@ class Tracker:
 
     def update(self, poses: np.ndarray, stamp: float, can_birth: BirthRule = None,
                variance: Optional[np.ndarray] = None, confirm_at_birth: BirthRule = None,
-               stamp_ns: Optional[int] = None) -> TrackUpdate:
+               stamp_ns: Optional[int] = None, views: Optional[np.ndarray] = None
+               ) -> TrackUpdate:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
 
@@ -217,6 +241,8 @@ class Tracker:
         ``confirm_at_birth`` holds. Both rules may also be functions of the indices ``[N]`` of
         the candidate poses returning ``[N]`` booleans, so their work is only done when there
         are any. ``stamp_ns`` is the same stamp in integer nanoseconds (default: rounded).
+        ``views [D]`` counts the cameras behind each pose: a TENTATIVE track is confirmed by
+        ``confirm_hits`` only once a pose of ``confirm_views`` views matched it.
         """
         cfg = self.config
         stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
@@ -263,6 +289,9 @@ class Tracker:
                 recovered[rows] = second
         hit = det >= 0
         all_hit = bool(hit.all())
+        if num_t and num_d and views is not None:
+            tr.support = np.where(hit, np.maximum(tr.support, views[np.maximum(det, 0)]),
+                                  tr.support)
         if num_t:
             self._observe(hit, stamp, stamp_ns, all_hit)
         if all_hit:                                 # the common case: nobody missed
@@ -292,7 +321,8 @@ class Tracker:
             confirm = np.zeros(len(new), dtype=bool)
             if confirm_at_birth is not None:
                 confirm = _rule(confirm_at_birth, np.ones(len(new), dtype=bool), new)
-            live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm))
+            support = views[new] if views is not None else None
+            live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm, support))
             det = np.concatenate((det, new))
             previous = np.concatenate((kept, np.full(len(new), -1)))
             recovered = np.concatenate((recovered, np.zeros(len(new), dtype=bool)))
@@ -342,7 +372,8 @@ class Tracker:
         tr.missed[current] = 0
         tr.hits[current] += 1
         confirm = current[(tr.state[current] == _COASTING)
-                          | (tr.hits[current] >= self.config.confirm_hits)]
+                          | ((tr.hits[current] >= self.config.confirm_hits)
+                             & (tr.support[current] >= self.config.confirm_views))]
         tr.state[confirm] = _CONFIRMED
         self.refresh(rows)
 
@@ -364,8 +395,10 @@ class Tracker:
         self.filter.reindex(np.nonzero(keep)[0])
         return dead
 
-    def _births(self, n: int, stamp: float, stamp_ns: int, confirm: np.ndarray) -> Tracks:
-        instant = self.config.confirm_hits <= 1
+    def _births(self, n: int, stamp: float, stamp_ns: int, confirm: np.ndarray,
+                support: Optional[np.ndarray] = None) -> Tracks:
+        support = np.zeros(n, dtype=np.int64) if support is None else support
+        instant = (self.config.confirm_hits <= 1) & (support >= self.config.confirm_views)
         state = np.where(confirm | instant, _CONFIRMED, _TENTATIVE).astype(np.int8)
         ids = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
         self.next_id += n
@@ -374,7 +407,7 @@ class Tracker:
                       last_observed=np.full(n, stamp),
                       first_seen_ns=np.full(n, stamp_ns, dtype=np.int64),
                       last_observed_ns=np.full(n, stamp_ns, dtype=np.int64),
-                      last_matched=np.full(n, stamp),
+                      last_matched=np.full(n, stamp), support=support,
                       hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
 
     def _observe(self, hit: np.ndarray, stamp: float, stamp_ns: int,
@@ -392,7 +425,8 @@ class Tracker:
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
             tr.last_observed_ns = np.where(hit, stamp_ns, tr.last_observed_ns)
             tr.last_matched = np.where(hit, stamp, tr.last_matched)
-        confirm = (tr.state == _COASTING) | (tr.hits >= self.config.confirm_hits)
+        confirm = (tr.state == _COASTING) | ((tr.hits >= self.config.confirm_hits)
+                                             & (tr.support >= self.config.confirm_views))
         if not all_hit:
             confirm &= hit
         tr.state = np.where(confirm, _CONFIRMED, tr.state)
