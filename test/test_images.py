@@ -14,6 +14,7 @@
 
 """Image messages -> numpy: the encodings camera drivers publish, and CompressedImage."""
 
+import math
 import os
 
 import cv2
@@ -255,6 +256,127 @@ def test_image_publisher_behind_steps_over_the_frames_of_skipped_instants(tmp_pa
         assert pub._next_frame() is None
     finally:
         pub.destroy_node()
+
+
+def _write_video(path, n, step):
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
+    for k in range(n):
+        writer.write(np.full((48, 64, 3), step * k, np.uint8))
+    writer.release()
+
+
+def _bounced(slot, n):
+    """Frame of ``slot`` bouncing over ``n`` frames, written out the long way."""
+    order = list(range(n)) + list(range(n - 2, 0, -1))
+    return order[slot % len(order)]
+
+
+def _played(ros_context, source, step, params):
+    """Run an ImagePublisher in this process; return (stamp ns, frame shown) per message."""
+    from mv3dpose_ros.nodes.image_publisher import ImagePublisher
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import deserialize_message
+    pub = ImagePublisher(context=ros_context, namespace='/bounce', parameter_overrides=[
+        Parameter('source', value=source)] + [Parameter(k, value=v) for k, v in params.items()])
+    sent = []
+    pub.image_pub.publish = sent.append
+    try:
+        pub.run()
+    finally:
+        pub.destroy_node()
+    shown = []
+    for msg in sent:                # looping: serialised bytes (cached ones with a new stamp)
+        msg = deserialize_message(msg, Image) if isinstance(msg, bytes) else msg
+        arr, _ = image_to_numpy(msg)
+        shown.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
+                      round(arr.mean() / step)))
+    return shown
+
+
+@pytest.mark.ros
+def test_image_publisher_bounces_a_folder_forward_then_backward(tmp_path, ros_context):
+    """--bounce: 0, 1, .., N-1, N-2, .., 1, 0, 1, ..: no jump at the wrap; stamps increase."""
+    for k in range(4):
+        cv2.imwrite(str(tmp_path / f'{k:02d}.png'), np.full((48, 64, 3), 40 * k, np.uint8))
+    # from frame 0 with reproducible stamps (as with --trigger free)
+    shown = _played(ros_context, str(tmp_path), 40, {
+        'bounce': True, 'rate_hz': 100.0, 'start_stamp': 100.0, 'max_frames': 15})
+    assert [f for _, f in shown] == [0, 1, 2, 3, 2, 1, 0, 1, 2, 3, 2, 1, 0, 1, 2]
+    stamps = [s for s, _ in shown]
+    assert stamps == [100 * 10**9 + k * 10**7 for k in range(15)]
+
+
+@pytest.mark.ros
+def test_image_publisher_bounces_a_video_on_the_instants(tmp_path, ros_context):
+    """On the grid, instant i shows frame i mod (2N - 2) reflected: every publisher in step."""
+    video, n = str(tmp_path / 'cam.avi'), 5
+    _write_video(video, n, 30)
+    shown = _played(ros_context, video, 30, {'bounce': True, 'rate_hz': 100.0,
+                                             'max_frames': 3 * (2 * n - 2)})
+    period = 10**7
+    stamps = [s for s, _ in shown]
+    assert all(b > a for a, b in zip(stamps, stamps[1:])) and stamps[0] % period == 0
+    assert [f for _, f in shown] == [_bounced(s // period, n) for s in stamps]
+    # one step at a time at consecutive instants: never a jump from the last frame to the first
+    steps = [abs(fb - fa) for (sa, fa), (sb, fb) in zip(shown, shown[1:]) if sb - sa == period]
+    assert steps and set(steps) == {1}
+    assert {f for _, f in shown} == set(range(n))
+
+
+def test_image_publisher_bounce_option_and_frame_order():
+    from mv3dpose_ros.nodes.image_publisher import _parse_cli, ImagePublisher
+    params = {p.name: p.value for p in _parse_cli(['clip.mp4', '--bounce', '--rate', '10'])}
+    assert params == {'source': 'clip.mp4', 'bounce': True, 'rate_hz': 10.0}
+
+    class _Source:
+        length = 0
+
+    pub = ImagePublisher.__new__(ImagePublisher)          # frame_of needs no node
+    pub.source, pub.bounce = _Source(), True
+    for n in (1, 2, 3, 7):
+        _Source.length = n
+        assert [pub.frame_of(i) for i in range(40)] == (
+            [0] * 40 if n == 1 else [_bounced(i, n) for i in range(40)])
+    pub.bounce = False
+    assert [pub.frame_of(i) for i in range(9)] == [i % 7 for i in range(9)]
+
+
+def test_frame_source_plays_a_video_backward_without_a_seek_per_frame(tmp_path):
+    """Bouncing, frames decoded lately are kept (bounded); a frame before them: one seek."""
+    from mv3dpose_ros.nodes.image_publisher import FrameSource
+    video, n = str(tmp_path / 'clip.avi'), 40
+    _write_video(video, n, 6)
+    frame_bytes = 48 * 64 * 3
+    src = FrameSource(video, back_bytes=8 * frame_bytes)
+
+    class _Seeks:                      # counts the seeks of the VideoCapture
+        def __init__(self, cap):
+            self.cap, self.count = cap, 0
+
+        def set(self, prop, value):  # noqa: A003 - VideoCapture.set
+            self.count += prop == cv2.CAP_PROP_POS_FRAMES
+            return self.cap.set(prop, value)
+
+        def __getattr__(self, name):
+            return getattr(self.cap, name)
+
+    src._cap = seeks = _Seeks(src._cap)
+    order = list(range(n)) + list(range(n - 2, -1, -1)) + list(range(1, n))
+    for k in order:
+        assert round(src.frame_at(k).mean() / 6) == k
+        assert src._back_used <= 8 * frame_bytes and len(src._back) <= 8
+    # forward: no seek; back from 38: 32-38 kept, then one seek per 8 frames (24-31, .., 0-7);
+    # forward again from 0-7 kept, then on from the decoder's position: no seek
+    assert seeks.count == math.ceil((n - 8) / 8), seeks.count
+    src.forget(n - 1)
+    src.forget(n - 1)                                   # not kept: nothing to drop
+    assert (n - 1) not in src._back and src._back_used == len(src._back) * frame_bytes
+    # without the buffer (not bouncing), every frame back is a seek
+    plain = FrameSource(video)
+    plain._cap = seeks = _Seeks(plain._cap)
+    for k in range(n - 1, -1, -1):
+        assert round(plain.frame_at(k).mean() / 6) == k
+    assert seeks.count == n - 1 and not plain._back     # 39 by stepping, then 38 .. 0
 
 
 def test_image_publisher_ends_quietly_when_ctrl_c_races_a_publish(tmp_path, capfd):

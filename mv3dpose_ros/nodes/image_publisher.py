@@ -29,6 +29,25 @@ or seeked to it; one whose container gives no frame count plays in order); with
 ``--trigger free`` each publisher has its own phase and plays from the first frame. With
 ``--start-stamp S`` frame ``k`` is stamped ``S + k / rate`` instead (reproducible stamps).
 
+``--bounce`` (implies ``--loop``) plays the source forward then backward, frames ``0 .. N-1,
+N-2 .. 1, 0, 1 ..``: instant ``i`` shows frame ``i mod (2N - 2)`` reflected at ``N - 1``, still
+the same frame in every publisher of a rig at the same instant (with ``--trigger free`` or
+``--start-stamp``, from frame 0). A short clip of a walking person then has no jump at the
+wrap, where plain ``--loop`` puts him back where he started in one frame (a tracker sees a
+teleport and gives a new id); he walks backward on the way back. Looping, each frame is
+decoded, converted and serialised once, and the serialised messages are kept up to
+``WIRE_CACHE_BYTES`` (512 MiB: 86 frames of 1080x1920 bgr8); a video's frames beyond that are
+decoded again each time. A decoder only seeks to keyframes (often one per clip), so going
+backward frame by frame would decode again from the keyframe before each frame (0.3-0.5 s for
+a 1080p frame near the end of a 100-frame clip); bouncing, the decoded frames that are not
+cached are kept up to ``BACK_BUFFER_BYTES`` (128 MiB, 21 such frames) and a frame before them
+is read with the ones before it in one seek. A 100-frame 1080x1920 clip then bounces from
+memory after its first cycle, nothing decoded (Pose2Sim cam01.mp4 at 10 Hz: 865 MB resident
+against 757 MB with ``--loop``, the same CPU; the first cycle's reads back can skip a few
+instants); a longer video seeks once per buffer on its way back, which can make publishing
+fall behind (skipped instants, warned): extract its frames to a folder, or ``--preload`` it
+if memory allows. A video whose container gives no frame count needs ``--preload`` to bounce.
+
 ``--encoding`` publishes any encoding camera drivers use (bgr8, rgb8, mono8, bgra8, rgba8,
 mono16, yuv422, yuv422_yuy2); ``--compressed jpeg|png`` publishes ``sensor_msgs/CompressedImage``
 on ``image_raw/compressed`` instead, as image_transport's compressed plugin does.
@@ -36,13 +55,18 @@ on ``image_raw/compressed`` instead, as image_transport's compressed plugin does
     mv3dpose_image_publisher ../shared/data/panoptic_demo/00_03 --rate 5 --loop \
         --calibration ../shared/data/panoptic_demo/camera_parameters.json --camera 00_03
 
-Every option is also a ROS parameter (``source``, ``rate_hz``, ``loop``, ``start_stamp``,
-``trigger``, ``frame_id``, ``encoding``, ``compressed``, ``calibration``, ``camera_name``,
-``reliability``, ``max_frames``, ``wait_for_subscribers``, ``preload``), so ``--params-file``
-works too.
+    mv3dpose_image_publisher ../shared/data/pose2sim_singleperson/videos/cam01.mp4 \
+        --camera cam_01 --rate 10 --bounce \
+        --calibration ../shared/data/pose2sim_multiperson/Calib_qualisys.toml
+
+Every option is also a ROS parameter (``source``, ``rate_hz``, ``loop``, ``bounce``,
+``start_stamp``, ``trigger``, ``frame_id``, ``encoding``, ``compressed``, ``calibration``,
+``camera_name``, ``reliability``, ``max_frames``, ``wait_for_subscribers``, ``preload``,
+``hold_s``), so ``--params-file`` works too.
 """
 
 import argparse
+import collections
 import math
 import os
 import struct
@@ -74,11 +98,18 @@ PUBLISH_ENCODINGS = ('bgr8', 'rgb8', 'mono8', 'bgra8', 'rgba8', 'mono16', 'yuv42
 WIRE_CACHE_BYTES = 512 * 1024 * 1024
 #: a video is stepped forward frame by frame (decoding them) up to this many, else it seeks
 VIDEO_SEEK_FRAMES = 64
+#: most bytes of decoded video frames kept for playing backward (--bounce; frames not cached
+#: as serialised messages): a decoder only seeks to keyframes, so reading a video backward
+#: frame by frame decodes again from the keyframe before each one (0.3-0.5 s for a 1080p frame
+#: near the end of a 100-frame clip with one keyframe)
+BACK_BUFFER_BYTES = 128 * 1024 * 1024
 
 PARAMETERS = {
     'source': ('', 'folder of images (sorted by name) or a video file'),
     'rate_hz': (10.0, 'publish rate; also the stamp spacing (1 / rate_hz)'),
     'loop': (False, 'start again after the last frame (stamps keep increasing)'),
+    'bounce': (False, 'loop forward then backward (frames 0 .. N-1, N-2 .. 1, 0 ..: no jump at '
+                      'the wrap, a moving person turns back); implies loop'),
     'start_stamp': (0.0, 'stamp of frame 0 [s], frame k at start + k / rate_hz; 0 = each frame '
                          'stamped with its capture instant on the node clock (like a driver)'),
     'trigger': ('grid', 'grid: capture instants on the multiples of 1 / rate_hz of the clock '
@@ -108,12 +139,19 @@ class FrameSource:
 
     A video whose container gives its frame count is indexed like a folder (``frame_at``
     steps forward or seeks), so looping publishers of a recorded rig show frame ``k`` of every
-    camera at the same instant; a stream without a count is read in order.
+    camera at the same instant; a stream without a count is read in order. With
+    ``back_bytes`` (played backward, ``--bounce``), the frames of a video that ``frame_at``
+    returned last are kept up to that many bytes, and a frame before them is read with the
+    ones before it in one seek, so going backward seeks once per buffer, not once per frame.
     """
 
-    def __init__(self, path: str, preload: bool = False) -> None:
+    def __init__(self, path: str, preload: bool = False, back_bytes: int = 0) -> None:
         self.path = path
         self._cap = None
+        self._back_bytes = back_bytes
+        self._back: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
+        self._back_used = 0
+        self._frame_nbytes = 0
         if os.path.isdir(path):
             self.files = sorted(os.path.join(path, f) for f in os.listdir(path)
                                 if f.lower().endswith(IMAGE_EXTENSIONS))
@@ -153,6 +191,7 @@ class FrameSource:
         if not ok:
             return None
         self._index += 1
+        self._frame_nbytes = frame.nbytes
         return frame
 
     def read_next(self) -> Optional[np.ndarray]:
@@ -182,9 +221,18 @@ class FrameSource:
         return len(self.files) if self.files is not None else self._video_frames
 
     def frame_at(self, index: int) -> np.ndarray:
-        """Return frame ``index`` of a seekable source; the next frame is the one after it."""
+        """
+        Return frame ``index`` of a seekable source; the next frame is the one after it.
+
+        A frame from the backward buffer (``back_bytes``) leaves the position as it was.
+        """
         if self._streaming:
+            if index in self._back:              # decoded lately: no seek back
+                self._back.move_to_end(index)
+                return self._back[index]
             ahead = index - self._index
+            if ahead < 0 and self._back_bytes:
+                return self._read_back(index)
             if 0 <= ahead <= VIDEO_SEEK_FRAMES:
                 for _ in range(ahead):           # decodes, but cheaper than a seek back
                     self._cap.grab()
@@ -197,7 +245,40 @@ class FrameSource:
             return self.frame_at(0)
         if frame is None:
             raise ValueError(f'{self.path}: no frame {index}')
+        self._keep(index, frame)
         return frame
+
+    def _read_back(self, index: int) -> np.ndarray:
+        """Read frame ``index`` of a video behind the decoder, with the frames before it."""
+        fit = max(1, self._back_bytes // max(1, self._frame_nbytes))
+        first = max(0, index - fit + 1)
+        self._cap.set(cv2.CAP_PROP_POS_FRAMES, first)     # decodes from the keyframe before
+        self._index = first
+        for k in range(first, index + 1):
+            frame = self._read()
+            if frame is None:
+                if 0 < k < self._video_frames:
+                    self._video_frames = k       # the container counted more than it holds
+                    return self.frame_at(0)
+                raise ValueError(f'{self.path}: no frame {k}')
+            self._keep(k, frame)
+        return self._back[index]
+
+    def _keep(self, index: int, frame: np.ndarray) -> None:
+        """Keep a decoded video frame for playing backward, dropping the oldest beyond the cap."""
+        if not (self._streaming and self._back_bytes):
+            return
+        self.forget(index)
+        self._back[index] = frame
+        self._back_used += frame.nbytes
+        while self._back_used > self._back_bytes and len(self._back) > 1:
+            self._back_used -= self._back.popitem(last=False)[1].nbytes
+
+    def forget(self, index: int) -> None:
+        """Drop frame ``index`` from the backward buffer (cached elsewhere)."""
+        frame = self._back.pop(index, None)
+        if frame is not None:
+            self._back_used -= frame.nbytes
 
     @property
     def _streaming(self) -> bool:
@@ -240,8 +321,14 @@ class ImagePublisher(Node):
             raise ValueError(f"trigger must be 'grid' or 'free', got {p['trigger']!r}")
         if p['compressed'] not in ('', 'jpeg', 'png'):
             raise ValueError(f"compressed must be '', 'jpeg' or 'png', got {p['compressed']!r}")
+        p['loop'] = bool(p['loop'] or p['bounce'])
         self.params = p
-        self.source = FrameSource(p['source'], bool(p['preload']))
+        self.bounce = bool(p['bounce'])
+        self.source = FrameSource(p['source'], bool(p['preload']),
+                                  BACK_BUFFER_BYTES if self.bounce else 0)
+        if self.bounce and not self.source.seekable:
+            raise ValueError(f'bounce plays frames by index, and the container of {p["source"]} '
+                             'gives no frame count: add --preload (decodes every frame first)')
         ns_last = self.get_namespace().strip('/').split('/')[-1]
         self.camera_info = None
         name = p['camera_name']
@@ -282,11 +369,27 @@ class ImagePublisher(Node):
             f'{p["compressed"] or p["encoding"]} at {p["rate_hz"]:g} Hz, stamps '
             f'{p["trigger"] + " capture instants" if self.stamp_now else "start + k / rate"}, '
             f'frame_id {self.frame_id}'
+            + (f', bouncing over {self.source.length} frames' if self.bounce else '')
             + (f', CameraInfo of {self.camera_name}' if self.camera_info else ''))
 
     def stamp_ns(self, k: int) -> int:
         """Return the stamp of frame ``k`` in nanoseconds."""
         return self.start_ns + k * self.period_ns
+
+    def frame_of(self, slot: int) -> int:
+        """
+        Return the index of the frame shown in ``slot`` (looping a seekable source).
+
+        ``slot % length``; bouncing, ``slot % (2 length - 2)`` reflected at the last frame:
+        0, 1, .., N-1, N-2, .., 1, 0, 1, ..
+        """
+        n = self.source.length
+        if not self.bounce:
+            return slot % n
+        if n < 2:
+            return 0
+        k = slot % (2 * n - 2)
+        return k if k < n else 2 * n - 2 - k
 
     def _next_frame(self, slot: Optional[int] = None
                     ) -> Optional[Tuple[int, Optional[np.ndarray]]]:
@@ -295,14 +398,15 @@ class ImagePublisher(Node):
 
         ``key`` is the frame's index in a seekable source (-1 otherwise); ``frame`` is None
         when its serialised message is cached (nothing to decode). ``slot`` (the capture
-        instant in periods of the clock, looping grid mode) picks frame ``slot % length``, so
-        every publisher of a rig shows the same moment at the same instant, whenever it started.
+        instant in periods of the clock, looping grid mode; the frame count, bouncing
+        otherwise) picks frame ``frame_of(slot)``, so every publisher of a rig shows the same
+        moment at the same instant, whenever it started.
         """
         limit = int(self.params['max_frames'])
         if limit and self.count >= limit:
             return None
         if slot is not None:
-            key = slot % self.source.length
+            key = self.frame_of(slot)
             return key, (None if key in self._wire else self.source.frame_at(key))
         for attempt in range(2):
             key = self.source.position if self.source.seekable else -1
@@ -354,7 +458,8 @@ class ImagePublisher(Node):
                 self.get_logger().warn(
                     f'publishing fell behind {self.params["rate_hz"]:g} Hz: {self.skipped} '
                     'frame instants skipped so far (CPU overloaded?)', throttle_duration_sec=10.0)
-            nxt = self._next_frame(due // self.slot_ns if synced else None)
+            nxt = self._next_frame(due // self.slot_ns if synced else
+                                   self.count if self.bounce else None)
             if nxt is None:
                 break
             try:
@@ -417,6 +522,7 @@ class ImagePublisher(Node):
         wire = serialize_message(msg)
         self._wire[key] = wire
         self._wire_bytes += len(wire)
+        self.source.forget(key)         # bouncing: no second copy in the backward buffer
         self.image_pub.publish(wire)
 
 
@@ -426,7 +532,12 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
                                      description=__doc__.splitlines()[1])
     parser.add_argument('source', nargs='?', help='image folder or video file')
     parser.add_argument('--rate', type=float, dest='rate_hz')
-    parser.add_argument('--loop', action='store_true', default=None)
+    parser.add_argument('--loop', action='store_true', default=None,
+                        help='start again after the last frame (stamps keep increasing)')
+    parser.add_argument('--bounce', action='store_true', default=None,
+                        help='loop forward then backward: frames 0..N-1, N-2..1, 0, 1.. (no '
+                        'jump at the wrap: a walking person walks back); implies --loop; on '
+                        'the grid every publisher of a rig shows the same frame at an instant')
     parser.add_argument('--start-stamp', type=float, dest='start_stamp',
                         help='stamp frame k start + k / rate [s] (default: the node clock at '
                         'publication); give the same to every camera for identical stamps')
@@ -447,7 +558,8 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
     parser.add_argument('--wait-for-subscribers', type=int, dest='wait_for_subscribers')
     parser.add_argument('--preload', action='store_true', default=None)
     parser.add_argument('--hold', type=float, dest='hold_s',
-                        help='with --loop on the grid: show each image this long [s]')
+                        help='with --loop / --bounce on the grid: show each image this long '
+                        '[s]')
     args = parser.parse_args(argv)
     return [Parameter(k, value=v) for k, v in vars(args).items() if v is not None]
 
