@@ -78,7 +78,7 @@ class TrackerConfig:
     max_coast_s: float = 1.0
     min_birth_joints: int = 6
     recovery_gate_m: float = 0.5        # second-pass gate for tracks and poses left unmatched
-    max_predict_s: float = 1.0          # motion extrapolated at most this long (then held)
+    max_predict_s: float = 0.5          # motion extrapolated at most this long (then held)
     lost_after_s: float = 0.5           # tracks unobserved longer match only what is left
     tentative_coast_s: float = 0.0      # a TENTATIVE track survives sets without it this long
     confirm_views: int = 0              # views a matched pose must once have had to confirm
@@ -250,7 +250,7 @@ class Tracker:
         tr = self.tracks
         num_t, num_d = len(tr), len(poses)
         det = np.full(num_t, -1)
-        recovered = np.zeros(num_t, dtype=bool)
+        recovered = np.zeros(num_t, dtype=np.int8)   # 1: recovery gate, 2: was lost
         unseen = np.maximum(stamp - tr.last_observed, 0.0)
         alive = unseen <= cfg.max_coast_s + 1e-9        # expired tracks take no part at all
         if num_t and num_d:
@@ -267,9 +267,9 @@ class Tracker:
             # a fresh track follows.
             recent = unseen <= cfg.lost_after_s + 1e-9
             lost = alive & ~recent
-            passes = [(alive & recent, gate, False), (alive & recent, wide, True)]
+            passes = [(alive & recent, gate, 0), (alive & recent, wide, 1)]
             if lost.any():
-                passes += [(lost, gate, True), (lost, wide, True)]
+                passes += [(lost, gate, 2), (lost, wide, 2)]
             taken = np.zeros(num_d, dtype=bool)
             for group, limit, second in passes:
                 if limit is None:
@@ -325,7 +325,7 @@ class Tracker:
             live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm, support))
             det = np.concatenate((det, new))
             previous = np.concatenate((kept, np.full(len(new), -1)))
-            recovered = np.concatenate((recovered, np.zeros(len(new), dtype=bool)))
+            recovered = np.concatenate((recovered, np.zeros(len(new), dtype=np.int8)))
         self.tracks = live
         filtered = self._filter(poses, variance, det, previous, stamp, recovered)
         return TrackUpdate(detection=det, previous=previous, deleted=deleted,
@@ -347,8 +347,11 @@ class Tracker:
         known = self.filter.count > 0
         tr.pose = np.where(known[..., None], self.filter.x, tr.pose)
         velocity = self.filter.body_velocity()
-        if recovered.any():              # not from a match outside the main gate
-            velocity = np.where(recovered[:, None], tr.velocity, velocity)
+        if recovered.any():
+            # not from a match outside the main gate; a track found after being lost has no
+            # velocity worth keeping (its filters restart)
+            velocity = np.where((recovered == 1)[:, None], tr.velocity, velocity)
+            velocity = np.where((recovered == 2)[:, None], np.nan, velocity)
         tr.velocity = velocity
         return out
 
