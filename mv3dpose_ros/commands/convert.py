@@ -120,30 +120,34 @@ def camera_sources(root: str, cameras: Sequence[str], calibration: str = '',
     """
     Map each camera to its (image or JSON) folder or video file under ``root``.
 
-    ``cameras`` are the calibrated names. Returns ``(camera -> path, calibrated cameras
-    without data)``. With ``strict``, every sub-folder or video of ``root`` must match a
-    calibrated camera, else ``ConvertError`` names it and the calibration's cameras.
+    ``cameras`` are the calibrated names; folders and videos (by their stem) are matched to them
+    as ``mv3dpose track`` matches pose folders (``io.openpose.match_camera_names``: ``cam01.mp4``
+    is camera ``cam_01``; a camera fitting several, e.g. a folder and a video, is an error
+    naming them). Returns ``(camera -> path, calibrated cameras without data)``. With
+    ``strict``, every sub-folder or video of ``root`` must match a calibrated camera, else
+    ``ConvertError`` names it and the calibration's cameras.
     """
-    from mv3dpose_ros.io.openpose import match_camera_folders
+    from mv3dpose_ros.io.openpose import match_camera_names
     if not os.path.isdir(root):
         raise ConvertError(f'{root}: input folder does not exist')
     entries = sorted(os.listdir(root))
-    videos = {Path(e).stem: os.path.join(root, e) for e in entries
-              if e.lower().endswith(VIDEO_EXTENSIONS)}
+    videos = {e: Path(e).stem for e in entries if e.lower().endswith(VIDEO_EXTENSIONS)
+              and os.path.isfile(os.path.join(root, e))}
     folders = [e for e in entries if os.path.isdir(os.path.join(root, e))
                and not e.startswith('.')]
     if not folders and not videos:
         raise ConvertError(f'{root}: no per-camera image folders or video files inside')
     try:
-        found, _ = match_camera_folders(root, cameras)
+        # The loose rule of `mv3dpose track` (cam01.mp4 or cam01/ is camera cam_01); a camera
+        # with both a folder and a video is ambiguous.
+        matched, _ = match_camera_names(cameras, {**{f: f for f in folders}, **videos}, root,
+                                        'folders or videos')
     except ValueError as exc:
         raise ConvertError(f'{root}: {exc}') from exc
-    for cam in cameras:
-        if cam not in found and cam in videos:
-            found[cam] = videos[cam]
+    found = {cam: os.path.join(root, entry) for cam, entry in matched.items()}
     used = {os.path.basename(p) for p in found.values()}
     orphans = [f for f in folders if f not in used]
-    orphans += [os.path.basename(v) for v in videos.values() if os.path.basename(v) not in used]
+    orphans += [v for v in videos if v not in used]
     source = f' in {calibration}' if calibration else ''
     if orphans and strict:
         raise ConvertError(f'{root}: {", ".join(orphans)} match no calibrated camera{source} '

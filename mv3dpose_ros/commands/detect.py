@@ -20,15 +20,24 @@
 
 ``DIR`` holds one image folder or one video file per camera (the layout ``mv3dpose convert
 images`` and the demo read). With ``-c`` the folders and videos are matched to the calibrated
-cameras the way ``mv3dpose track`` matches pose folders (``cam01`` is ``cam_01``) and the
-image size is checked against the calibration; without it every folder / video is a camera.
+cameras the way ``mv3dpose track`` matches pose folders (``cam01/`` or ``cam01.mp4`` is
+``cam_01``; a camera fitting several is an error naming them) and the output folders take the
+calibrated names; without it every folder / video is a camera, named as it is.
+
+With ``-c`` the image size is also compared with the calibration by the rule the live
+``fusion_node`` applies (``core.camera.fit_image_size``): a codec's crop or padding of at most
+``--image-size-tolerance-px`` per dimension (1080 vs 1088) keeps the keypoints, a resize with
+the same aspect ratio scales them into the calibration's pixels; either is printed as a note
+per camera naming the assumption. Any other size is written in image pixels with a warning
+(tracking will be wrong until the calibration or the images are fixed).
+
 Each camera gets ``POSES_ROOT/<camera>/<camera>_<frame:012d>_keypoints.json`` (COCO-17
-keypoints in raw image pixels, one file per image, also when nobody is seen), the frame number
-being the last number of the image file name (or the image's index when a folder has unnumbered
-files; the frame index for videos), so files of different cameras with the same number form
-one time point for ``mv3dpose track``. The model is the one ``pose2d_node`` runs
-(``pose2d/estimator.py``), so offline and live detections agree. Unreadable images are
-reported and skipped (no file is written for them).
+keypoints in image pixels, or the calibration's pixels as above; one file per image, also when
+nobody is seen), the frame number being the last number of the image file name (or the
+image's index when a folder has unnumbered files; the frame index for videos), so files of
+different cameras with the same number form one time point for ``mv3dpose track``. The model
+is the one ``pose2d_node`` runs (``pose2d/estimator.py``), so offline and live detections
+agree. Unreadable images are reported and skipped (no file is written for them).
 """
 
 import argparse
@@ -36,6 +45,7 @@ import os
 import sys
 from typing import Dict, Iterator, List, Optional, Tuple
 
+from mv3dpose_ros.core.camera import fit_image_size, IMAGE_SIZE_TOLERANCE_PX, ImageFit
 import numpy as np
 
 LAYOUT = 'coco17'
@@ -59,6 +69,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='onnxruntime intra-op threads (default 0 = one per core)')
     parser.add_argument('--score-threshold', type=float, default=None,
                         help='minimum person score (default: the model family default)')
+    parser.add_argument('--image-size-tolerance-px', type=int, default=IMAGE_SIZE_TOLERANCE_PX,
+                        metavar='PX',
+                        help='with -c: images whose size differs from the calibration are '
+                        'used when it is a resize (same aspect ratio: keypoints scaled into the '
+                        'calibration pixels) or a crop or padding of at most this many pixels '
+                        'per dimension (keypoints unchanged: assumed at the right/bottom, as '
+                        'codecs do); other sizes are warned about. Negative: only the '
+                        'calibrated size is accepted (default %(default)s, as the '
+                        'input_image_size_tolerance_px parameter of fusion_node)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
 
 
@@ -134,6 +153,28 @@ def _estimator(args):
                           else None, score_threshold=args.score_threshold)
 
 
+def _image_fit(cam: str, calib, image: np.ndarray, tolerance_px: int
+               ) -> Tuple[Optional[ImageFit], Optional[str]]:
+    """
+    Return ``(fit or None, message or None)`` for an image of a calibrated camera.
+
+    The fit maps keypoints into the calibration's pixels (None: same size, or a mismatch left
+    in image pixels); the message is the note or warning to print for that image size.
+    """
+    height, width = image.shape[:2]
+    fit = fit_image_size(calib.width, calib.height, width, height, tolerance_px)
+    if fit.kind == 'same':
+        return None, None
+    if fit.accepted:
+        return fit, (f'note: camera {cam}: {fit.kind}: {fit.note}; keypoints written in the '
+                     f"calibration's {calib.width}x{calib.height} pixels "
+                     f'(--image-size-tolerance-px {tolerance_px})')
+    return None, (f'warning: camera {cam}: images are {width}x{height} but the calibration '
+                  f'says {calib.width}x{calib.height} ({fit.note}); keypoints are in image '
+                  'pixels, so tracking will be wrong unless the calibration is fixed (or, for '
+                  'a crop or padding by the codec, --image-size-tolerance-px raised)')
+
+
 def run(args) -> int:
     """Detect 2D poses in every image of every camera and write OpenPose JSON."""
     from mv3dpose_ros.commands.convert import ConvertError
@@ -164,7 +205,7 @@ def run(args) -> int:
                 fps_seen.add(round(fps, 3))
             folder = os.path.join(args.output, cam)
             os.makedirs(folder, exist_ok=True)
-            size_checked = cam not in cams
+            fits: Dict[Tuple[int, int], Optional[ImageFit]] = {}    # per (height, width)
             for frame, name, image in frames:
                 bar.update(1)
                 if image is None:
@@ -172,18 +213,17 @@ def run(args) -> int:
                     bar.write(f'mv3dpose detect: skipped {name}: cannot decode the image',
                               file=sys.stderr)
                     continue
-                if not size_checked:
-                    size_checked = True
-                    want = (cams[cam].width, cams[cam].height)
-                    if (image.shape[1], image.shape[0]) != want:
-                        bar.write(f'mv3dpose detect: warning: camera {cam}: images are '
-                                  f'{image.shape[1]}x{image.shape[0]} but the calibration '
-                                  f'says {want[0]}x{want[1]}; keypoints are in image pixels, '
-                                  'so tracking will be wrong unless the calibration is fixed',
-                                  file=sys.stderr)
+                size = image.shape[:2]
+                if cam in cams and size not in fits:
+                    fits[size], message = _image_fit(cam, cams[cam], image,
+                                                     args.image_size_tolerance_px)
+                    if message:
+                        bar.write(f'mv3dpose detect: {message}', file=sys.stderr)
+                fit = fits.get(size)
                 det = estimator.infer(image, 'bgr')
+                keypoints = fit.apply(det.keypoints) if fit is not None else det.keypoints
                 write_openpose_file(os.path.join(folder, openpose_filename(cam, frame)),
-                                    det.keypoints)
+                                    keypoints)
                 written += 1
                 people.append(len(det))
     except KeyboardInterrupt:

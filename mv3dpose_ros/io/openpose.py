@@ -268,44 +268,59 @@ def _number(name: str) -> Optional[int]:
     return int(numbers[0]) if len(numbers) == 1 else None
 
 
+def match_camera_names(cameras: Sequence[str], entries: Mapping[str, str], where: str = '',
+                       what: str = 'folders') -> Tuple[Dict[str, str], List[str]]:
+    """
+    Match each camera to the entry (a folder, a video file) named like it.
+
+    ``entries`` maps each entry's label (its file name, shown in messages) to the name compared
+    with the cameras (a folder's name, a video's stem). An entry named exactly like the camera
+    wins; otherwise names are compared loosely, so Pose2Sim's ``cam01_json`` or ``cam01.mp4``
+    is camera ``cam_01``, and last by their one number, so ``Camera0`` is camera ``0`` of a
+    VoxelPose calibration. Returns ``(camera -> label, cameras without an entry)``. A camera
+    that fits several entries, or an entry that fits several cameras, raises ValueError naming
+    them (``what`` names the entries in that message, ``where`` their folder).
+    """
+    place = f' in {where}' if where else ''
+    labels = sorted(entries)
+    found: Dict[str, str] = {}
+    missing: List[str] = []
+    for cam in cameras:
+        cands = [e for e in labels if entries[e] == cam]
+        if not cands:
+            key = _normalise(cam)
+            cands = [e for e in labels if _normalise(entries[e]) == key]
+        if not cands and _number(cam) is not None:
+            # Numbered cameras ('0' in VoxelPose files) and folders like 'Camera0', 'c0_json'.
+            cands = [e for e in labels if _number(entries[e]) == _number(cam)]
+        if len(cands) > 1:
+            raise ValueError(f'camera {cam!r} matches several {what}{place}: '
+                             f'{", ".join(cands)}; rename them or pass --cameras')
+        if cands:
+            found[cam] = cands[0]
+        else:
+            missing.append(cam)
+    users: Dict[str, List[str]] = {}
+    for cam, label in found.items():
+        users.setdefault(label, []).append(cam)
+    clash = {label: cams for label, cams in users.items() if len(cams) > 1}
+    if clash:
+        raise ValueError(f'one of the {what}{place} matches several cameras: ' + '; '.join(
+            f'{label} <- {", ".join(cams)}' for label, cams in clash.items()))
+    return found, missing
+
+
 def match_camera_folders(root: str, cameras: Sequence[str]) -> Tuple[Dict[str, str], List[str]]:
     """
-    Find the folder of each camera under ``root``.
+    Find the folder of each camera under ``root`` (names matched by ``match_camera_names``).
 
-    A folder named exactly like the camera wins; otherwise names are compared loosely, so
-    Pose2Sim's ``cam01_json`` is camera ``cam_01``, and last by their one number, so
-    ``Camera0`` is camera ``0`` of a VoxelPose calibration. Returns
-    ``(camera -> folder, messages)``
-    where messages name cameras without a folder; ambiguous matches raise ValueError listing
-    the candidates.
+    Returns ``(camera -> folder, messages)`` where messages name cameras without a folder;
+    ambiguous matches raise ValueError listing the candidates.
     """
     if not os.path.isdir(root):
         raise FileNotFoundError(f'poses root {root} is not a folder')
     subdirs = sorted(d for d in os.listdir(root) if os.path.isdir(os.path.join(root, d)))
-    found: Dict[str, str] = {}
-    missing: List[str] = []
-    for cam in cameras:
-        if cam in subdirs:
-            found[cam] = os.path.join(root, cam)
-            continue
-        key = _normalise(cam)
-        cands = [d for d in subdirs if _normalise(d) == key]
-        if not cands and _number(cam) is not None:
-            # Numbered cameras ('0' in VoxelPose files) and folders like 'Camera0', 'c0_json'.
-            cands = [d for d in subdirs if _number(d) == _number(cam)]
-        if len(cands) > 1:
-            raise ValueError(f'camera {cam!r} matches several folders in {root}: '
-                             f'{", ".join(cands)}; rename them or pass --cameras')
-        if cands:
-            found[cam] = os.path.join(root, cands[0])
-        else:
-            missing.append(f'camera {cam!r}: no folder in {root} (have: '
-                           f'{", ".join(subdirs) or "none"})')
-    users: Dict[str, List[str]] = {}
-    for cam, folder in found.items():
-        users.setdefault(folder, []).append(cam)
-    clash = {f: c for f, c in users.items() if len(c) > 1}
-    if clash:
-        raise ValueError('one folder matches several cameras: ' + '; '.join(
-            f'{os.path.basename(f)} <- {", ".join(c)}' for f, c in clash.items()))
-    return found, missing
+    found, missing = match_camera_names(cameras, {d: d for d in subdirs}, root)
+    return ({cam: os.path.join(root, d) for cam, d in found.items()},
+            [f'camera {cam!r}: no folder in {root} (have: {", ".join(subdirs) or "none"})'
+             for cam in missing])
