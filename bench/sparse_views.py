@@ -28,8 +28,9 @@ Hz; 5 phases, no GT); Campus GT through the simulated detector (``sim.detector.d
 tracker each), taking alternately every 2nd and 3rd frame (10 Hz mean, stamped at their real
 capture time); Panoptic band1 GT (20 frames at 30 fps, every 3rd = 10 Hz, 3 phases) in 5 and
 10 HD cameras; a synthetic 5-camera rig of 4 people walking for 20 s at 10 Hz (``sim``; long
-enough that births do not dominate, as they do in the 7-set Panoptic runs). Without ``--delays`` every frame is stepped with the views it kept (none: an
-empty set), as ``mv3dpose track`` steps a frame with missing files.
+enough that births do not dominate, as they do in the 7-set Panoptic runs). Without
+``--delays`` every frame is stepped with the views it kept (none: an empty set), as
+``mv3dpose track`` steps a frame with missing files.
 
 ``--delays``: each message arrives capture + 30 ms + camera index x 40 ms + jitter (exp.,
 mean 15 ms; 5 % stalls of 0.2-0.6 s), replayed in arrival order through the real
