@@ -136,8 +136,9 @@ class FusionConfig:
     view_min_joints: int = 3                # joints a view must update to observe a track
     view_only_s: float = 1.0                # single views keep a track observed this long
     #                                         after its last triangulated match (depth drifts)
-    tentative_coast_s: float = 0.25         # a TENTATIVE track outlives sets without it this
-    #                                         long (sparse views: not every set sees a birth)
+    tentative_coast_s: float = 0.25         # a TENTATIVE track outlives sets that miss a camera
+    #                                         and it this long (not every sparse set sees a
+    #                                         birth; a complete set without it deletes it)
     view_gate_chi2: float = 13.8            # ray innovation gate (chi-square, 2 dof, 99.9 %)
 
     def validate(self) -> None:
@@ -310,8 +311,9 @@ class Fusion:
         merged = self._merge_duplicates() if self._duplicates else None
         tr = self.tracker.tracks
         lost = tr.ids[stamp - tr.last_observed > cfg.publish_coast_s + 1e-9]
+        sparse = any(views.get(n) is None for n in self.camera_names)
         upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns,
-                                  views=(members >= 0).sum(axis=1))
+                                  views=(members >= 0).sum(axis=1), sparse=sparse)
         rays = None
         if cfg.view_updates and len(self.tracker.tracks):
             rays = self._update_from_views(upd, members, stamp, stamp_ns)

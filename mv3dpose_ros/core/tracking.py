@@ -80,7 +80,8 @@ class TrackerConfig:
     recovery_gate_m: float = 0.5        # second-pass gate for tracks and poses left unmatched
     max_predict_s: float = 0.5          # motion extrapolated at most this long (then held)
     lost_after_s: float = 0.5           # tracks unobserved longer match only what is left
-    tentative_coast_s: float = 0.0      # a TENTATIVE track survives sets without it this long
+    tentative_coast_s: float = 0.0      # a TENTATIVE track survives sparse sets without it
+    #                                     this long (``update(sparse=True)``)
     confirm_views: int = 0              # views a matched pose must once have had to confirm
     # per-joint Kalman filters (core.smoothing.JointKalman)
     accel_noise: float = 2.0            # white acceleration noise density [m^2/s^3]
@@ -228,8 +229,8 @@ class Tracker:
 
     def update(self, poses: np.ndarray, stamp: float, can_birth: BirthRule = None,
                variance: Optional[np.ndarray] = None, confirm_at_birth: BirthRule = None,
-               stamp_ns: Optional[int] = None, views: Optional[np.ndarray] = None
-               ) -> TrackUpdate:
+               stamp_ns: Optional[int] = None, views: Optional[np.ndarray] = None,
+               sparse: bool = True) -> TrackUpdate:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
 
@@ -242,7 +243,9 @@ class Tracker:
         the candidate poses returning ``[N]`` booleans, so their work is only done when there
         are any. ``stamp_ns`` is the same stamp in integer nanoseconds (default: rounded).
         ``views [D]`` counts the cameras behind each pose: a TENTATIVE track is confirmed by
-        ``confirm_hits`` only once a pose of ``confirm_views`` views matched it.
+        ``confirm_hits`` only once a pose of ``confirm_views`` views matched it. ``sparse``:
+        some cameras are missing from these poses, so a TENTATIVE track not matched now may
+        wait ``tentative_coast_s`` (a complete set that does not see it deletes it).
         """
         cfg = self.config
         stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
@@ -298,7 +301,7 @@ class Tracker:
             deleted, kept, live = Tracks.empty(self.num_joints), np.arange(num_t), tr
         else:
             tentative = tr.state == _TENTATIVE
-            wait = ~tentative | (unseen <= cfg.tentative_coast_s + 1e-9)
+            wait = ~tentative | (sparse & (unseen <= cfg.tentative_coast_s + 1e-9))
             coast = ~hit & wait & alive
             keep = hit | coast
             tr.missed = np.where(hit, 0, tr.missed + 1)
