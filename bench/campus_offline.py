@@ -22,7 +22,8 @@ them), is written as OpenPose JSON folders named ``Camera0..2``, tracked with
 publishes on ``~/tracks``; ``--smooth fixed-lag --lag-frames 3``, its ``~/tracks_smoothed``;
 ``--smooth offline``) and scored with ``mv3dpose eval``. Prints PCP, MOTA, MPJPE and id
 switches side by side per noise level, averaged over several detector seeds: figures, not
-assertions. ``python bench/campus_offline.py [--noise 1,2] [--seeds 1,2,3] [--per-seed]``
+assertions. ``python bench/campus_offline.py [--noise 1,2] [--seeds 1,2,3] [--per-seed]
+[--params FILE]`` (``FILE``: FusionConfig fields, as ``mv3dpose track --params``)
 """
 
 import argparse
@@ -32,6 +33,7 @@ import json
 import os
 import sys
 import tempfile
+from typing import Optional
 
 from mv3dpose_ros import cli
 from mv3dpose_ros.core.calibration import load_calibration
@@ -69,14 +71,14 @@ MODES = (('live', ['causal']), ('fixed-lag', ['fixed-lag', '--lag-frames', '3'])
          ('offline', ['offline']))
 
 
-def score(folder: str, smooth: list, name: str) -> dict:
+def score(folder: str, smooth: list, name: str, params: Optional[str] = None) -> dict:
     """Run ``mv3dpose track --smooth ...`` and ``mv3dpose eval``; return the eval figures."""
     tracks = os.path.join(folder, f'tracks_{name}.jsonl')
     figures = os.path.join(folder, f'eval_{name}.json')
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         assert cli.main(['track', '--calibration', CALIB, '--poses', folder, '--layout',
                          'shelf14', '--fps', '25', '--smooth', *smooth, '-o', tracks,
-                         '--no-progress']) == 0
+                         '--no-progress'] + (['--params', params] if params else [])) == 0
         assert cli.main(['eval', '--tracks', tracks, '--gt', DATA, '--format', 'campus',
                          '--json', figures]) == 0
     with open(figures, encoding='utf-8') as fh:
@@ -91,6 +93,8 @@ def main() -> int:
     parser.add_argument('--noise', default='1,2', help='detector noise scales (default 1,2)')
     parser.add_argument('--seeds', default='1,2,3', help='detector seeds (default 1,2,3)')
     parser.add_argument('--per-seed', action='store_true', help='also print every seed')
+    parser.add_argument('--params', metavar='FILE',
+                        help='FusionConfig fields for mv3dpose track (A/B of a setting)')
     args = parser.parse_args()
     if not os.path.isdir(DATA):
         print(f'no Campus data at {DATA}', file=sys.stderr)
@@ -110,7 +114,7 @@ def main() -> int:
             with tempfile.TemporaryDirectory() as folder:
                 write_openpose(folder, scale, seed, frames)
                 for name, smooth in MODES:
-                    rows[name].append(score(folder, smooth, name))
+                    rows[name].append(score(folder, smooth, name, args.params))
             if args.per_seed:
                 print(f'{scale:5g} {"s" + str(seed):>6} ' + ' '.join(
                     _cell(rows[name][-1]) for name, _ in MODES))

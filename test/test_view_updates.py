@@ -50,6 +50,8 @@ def _add_track(fusion, pose, stamp):
     tr.filter.update(z, np.full((n + 1, num_j), 1e-4), stamp)
     tr.refresh(np.array([n]))
     fusion._confidence = np.vstack((fusion._confidence, np.ones((1, num_j))))
+    fusion._view_time = np.vstack((fusion._view_time, np.full((1, len(fusion.cameras)),
+                                                              -np.inf)))
     return int(tr.tracks.ids[n])
 
 
@@ -125,6 +127,36 @@ def test_a_person_seen_by_one_camera_stays_tracked_and_keeps_improving(view_upda
     assert all((t.num_views[t.joint_state == JointState.TRIANGULATED] == 1).all() for t in last)
     # the reported uncertainty includes the depth a single view leaves open
     assert all(t.position_covariance[0, 0] > 0.3 ** 2 for t in last)
+
+
+def test_two_cameras_in_alternate_sets_keep_a_person_located():
+    """Sets of one camera each, two cameras taking turns: together they fix the depth."""
+    scene = _scene(num_frames=60)
+    fusion = Fusion(scene.cameras, scene.layout)
+    cams = list(scene.cameras)
+    errors, confirmed = [], []
+    for f, (stamp, views) in enumerate(scene.frames()):
+        if f >= 20:
+            one = cams[0] if f % 2 else cams[1]
+            views = {one: views[one]}
+        out = [t for t in fusion.step(views, stamp) if t.state != TrackState.DELETED]
+        if 30 <= f < 38:          # 1-1.8 s after the last set: past view_only_s, still located
+            confirmed.append(sum(t.state == TrackState.CONFIRMED for t in out))
+            errors.extend(_error(t, scene.gt[f]) for t in out)
+    assert sum(confirmed) == 2 * len(confirmed), confirmed
+    assert np.median(errors) < 0.2, np.median(errors)
+    alone = Fusion(scene.cameras, scene.layout, FusionConfig(view_only_s=1.0))
+    alone._paired_views = lambda rows, cam, stamp: np.zeros(len(rows), dtype=bool)
+    states = []
+    for f, (stamp, views) in enumerate(scene.frames()):
+        if f >= 20:
+            one = cams[0] if f % 2 else cams[1]
+            views = {one: views[one]}
+        if 30 <= f < 38:
+            states += [t.state for t in alone.step(views, stamp)]
+        else:
+            alone.step(views, stamp)
+    assert TrackState.CONFIRMED not in states       # one camera at a time, unpaired: coasting
 
 
 def test_single_views_do_better_than_sets_when_camera_frames_are_dropped():

@@ -358,18 +358,23 @@ class Tracker:
         tr.velocity = velocity
         return out
 
-    def observe_views(self, rows: np.ndarray, stamp: float, stamp_ns: int) -> None:
+    def observe_views(self, rows: np.ndarray, stamp: float, stamp_ns: int,
+                      located: Optional[np.ndarray] = None) -> None:
         """
         Count observations of tracks ``rows`` by single views, after their filters took them.
 
         At the stamp of the last ``update`` a track that no 3D pose matched is observed after
         all (CONFIRMED, not missed); a late view (older stamp) moves its last observation
-        forward only. Pose and body velocity are re-read from the joint filters.
+        forward only. Pose and body velocity are re-read from the joint filters. Tracks
+        ``located`` (views of two cameras fixed their depth) count as matched in 3D at
+        ``stamp`` for the tracking gate.
         """
         rows = np.asarray(rows, dtype=np.int64)
+        tr = self.tracks
+        if located is not None and len(located):
+            tr.last_matched[located] = np.maximum(tr.last_matched[located], stamp)
         if not len(rows):
             return
-        tr = self.tracks
         newer = tr.last_observed[rows] < stamp
         now = rows[newer]
         tr.last_observed[now] = stamp
