@@ -72,9 +72,11 @@ _TRIANGULATED = np.uint8(JointState.TRIANGULATED)
 _TRACK_STATES = {int(s): s for s in TrackState}
 _SOURCES = {int(s): s for s in PositionSource}
 _TENTATIVE_TRACK = np.int8(TrackState.TENTATIVE)
-_COASTING_TRACK = np.int8(TrackState.COASTING)
 # Frames two tracks must look like one person (close, no shared camera) before they merge.
 _DUPLICATE_FRAMES = 3
+#: A late view counts for joints updated at most this long [s] after its stamp: free-running
+#: cameras' views of one instant differ by a few milliseconds (half a 10 Hz period).
+SAME_INSTANT_S = 0.05
 #: Rays of two cameras at most this far apart in time [s] fix a person's depth (see
 #: ``Fusion._paired_views``).
 VIEW_PAIR_S = 0.5
@@ -343,8 +345,8 @@ class Fusion:
         CONFIRMED or COASTING track it projects onto (at ``stamp``, which may be older than
         the last step) and its keypoints update that track's joint filters as rays. Nothing
         is born and nothing is output; the next ``step`` reports the tracks. Returns the
-        number of tracks updated (0 with ``view_updates`` off, for an unknown camera or a
-        stamp older than the tracks can use).
+        number of tracks updated (0 with ``view_updates`` off, for an unknown camera, or when
+        every joint it saw was updated after ``stamp``: it brings nothing new).
         """
         stamp = float(stamp)
         stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
@@ -374,9 +376,11 @@ class Fusion:
         paired[enough] = self._paired_views(cand[rows][enough], c, stamp)
         observed = cand[rows][enough & (self._depth_known(stamp)[cand[rows]] | paired)]
         self.tracker.observe_views(observed, stamp, stamp_ns, cand[rows][paired])
-        self.tracker.refresh(cand[rows])
-        self.counts['late_views_used'] += 1
-        return len(observed)
+        updated = cand[rows][res.accepted.any(axis=1)]
+        if len(updated):
+            self.tracker.refresh(updated)
+            self.counts['late_views_used'] += 1
+        return len(updated)
 
     # ------------------------------------------------------------------ single views
     def _update_from_views(self, upd, members: np.ndarray, stamp: float, stamp_ns: int,
@@ -570,7 +574,8 @@ class Fusion:
             direction = direction / np.sqrt((direction * direction).sum(axis=-1))[..., None]
         return self.tracker.filter.update_rays(rows, self._centres[cam], direction,
                                                self.noise_norm, stamp,
-                                               self.config.view_gate_chi2, _MIN_VARIANCE)
+                                               self.config.view_gate_chi2, _MIN_VARIANCE,
+                                               SAME_INSTANT_S)
 
     # ------------------------------------------------------------------ duplicates
     def _count_duplicates(self, rays: Optional['_Rays'], upd, members: np.ndarray) -> None:

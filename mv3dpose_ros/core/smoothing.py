@@ -188,7 +188,7 @@ class JointKalman:
 
     def update_rays(self, rows: np.ndarray, origin: np.ndarray, direction: np.ndarray,
                     noise_norm: float, stamp: float, gate_chi2: float,
-                    min_variance: float = 0.0) -> RayUpdate:
+                    min_variance: float = 0.0, same_instant_s: float = 0.0) -> RayUpdate:
         """
         Fold in one camera's view of joints: each 2D keypoint is a ray from ``origin``.
 
@@ -204,15 +204,17 @@ class JointKalman:
         A joint updated after ``stamp`` (a late message) is left alone: retrodicted with a
         velocity that lags, the residual pulls the joint back towards where the person was
         (measured: a one-step out-of-sequence update made the joints worse), so a late view
-        counts where it is the newest news, e.g. for joints held or tracks coasting.
+        counts where it is the newest news, e.g. for joints held or tracks coasting. A joint
+        updated at most ``same_instant_s`` after ``stamp`` counts as updated at ``stamp``
+        (views of one instant from free-running cameras differ by a few milliseconds).
         """
         rows = np.asarray(rows, dtype=np.int64)
         x, v, t = self.x[rows], self.v[rows], self.t[rows]
         count = self.count[rows]
         dt = stamp - t
         seen = np.isfinite(direction[..., 0])
-        live = (count > 0) & (dt >= 0) & (dt <= self.max_gap_s + 1e-9) & seen
-        dt = np.where(live, dt, 0.0)
+        live = (count > 0) & (dt >= -same_instant_s) & (dt <= self.max_gap_s + 1e-9) & seen
+        dt = np.where(live, np.maximum(dt, 0.0), 0.0)
         q = self.q
         qdt = q * dt
         pxv = self.p_xv[rows] + dt * (self.p_vv[rows] + qdt / 2)
@@ -237,7 +239,7 @@ class JointKalman:
         self.p_xx[rows] = np.where(accept, pxx * (1 - two_thirds * k1), self.p_xx[rows])
         self.p_xv[rows] = np.where(accept, pxv * (1 - two_thirds * k1), self.p_xv[rows])
         self.p_vv[rows] = np.where(accept, pvv - two_thirds * k2 * pxv, self.p_vv[rows])
-        self.t[rows] = np.where(accept, stamp, t)
+        self.t[rows] = np.where(accept, np.maximum(stamp, t), t)
         self.count[rows] = np.where(accept, count + 1, count)
         point = np.where(a3, xp + resid, np.nan)
         return RayUpdate(accepted=accept, point=point, variance=np.where(accept, r, np.nan))

@@ -643,13 +643,16 @@ class FusionNode(Node):
             self._reject(state, 'late', reason, now)
             return
         try:
-            self.fusion.update_view(state.name, poses, stamp_ns / NS_PER_S, stamp_ns)
+            used = self.fusion.update_view(state.name, poses, stamp_ns / NS_PER_S, stamp_ns)
         except Exception as exc:  # noqa: B902 - a core failure must not stop the node
             self.counts['fusion_errors'] += 1
             self._rlog('fusion_error', f'Fusion.update_view failed on camera {state.name} at '
                        f'{stamp_ns / NS_PER_S:.6f} s ({exc!r}); message dropped')
             return
-        state.late_used += 1
+        if used:
+            state.late_used += 1
+        # else: every joint it saw was updated after its stamp (or nobody to update): it
+        # brought nothing, and counts as late in /diagnostics, not as rejected
 
     def _on_skipped(self, cam: str, msg: SkippedImages) -> None:
         """Stop waiting for the camera's images it announces it sends no persons for."""
