@@ -304,9 +304,7 @@ class Fusion:
             if ok.any() and len(self.tracker.tracks):
                 # a fragment of a tracked person (its views split from the rest by the
                 # association) is no one new: a track of it would be a duplicate
-                near = median_joint_distance(tri.joints[rows[ok]], self._predicted(stamp),
-                                             cfg.min_shared_joints)
-                ok[ok] = ~(near < cfg.merge_distance_m).any(axis=1)
+                ok[ok] = ~self._near_a_track(tri.joints[rows[ok]], stamp)
             return ok
 
         def strong(rows: np.ndarray) -> np.ndarray:
@@ -423,6 +421,8 @@ class Fusion:
                 rows, cols, flip = self._match_view(c, cand, x.take(free, axis=0), stamp, pred)
                 assigned[cand[rows], c] = free[cols]
                 flipped[cand[rows], c] = flip
+        if not sparse and not (assigned > np.where(from_member, assigned, -1)).any():
+            return None                  # a complete set and no pose left over for a track
         if not (assigned >= 0).any():
             return None
         pts = x.take(assigned, axis=0)                  # [T, C, J, 3]; -1: the missing row
@@ -478,6 +478,20 @@ class Fusion:
         kal.accepted = kal.accepted | acc
         return rays
 
+    def _near_a_track(self, poses: np.ndarray, stamp: float) -> np.ndarray:
+        """Tell which 3D poses ``[N, J, 3]`` lie within ``merge_distance_m`` of a track."""
+        cfg = self.config
+        pred = self._predicted(stamp)
+        a, b = centroid(poses), centroid(pred)        # cheap first: centres far apart
+        d = a[:, None] - b[None]
+        with np.errstate(invalid='ignore'):
+            maybe = ((d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2).any(axis=1)
+        out = np.zeros(len(poses), dtype=bool)
+        if maybe.any():
+            near = median_joint_distance(poses[maybe], pred, cfg.min_shared_joints)
+            out[maybe] = (near < cfg.merge_distance_m).any(axis=1)
+        return out
+
     def _depth_known(self, stamp: float) -> np.ndarray:
         """
         Tell, per track, whether single views may still count as observing it at ``stamp``.
@@ -494,10 +508,11 @@ class Fusion:
         """Follow the tracks' rows with the per-camera view times; note this set's 3D ones."""
         previous = upd.previous
         old = self._view_time
-        self._view_time = np.full((len(previous), len(self.cameras)), -np.inf)
-        kept = previous >= 0
-        if kept.any():
-            self._view_time[kept] = old[previous[kept]]
+        if len(previous) != len(old) or previous.tolist() != list(range(len(old))):
+            self._view_time = np.full((len(previous), len(self.cameras)), -np.inf)
+            kept = previous >= 0
+            if kept.any():
+                self._view_time[kept] = old[previous[kept]]
         det = upd.detection
         has = det >= 0
         if has.any():
@@ -582,27 +597,13 @@ class Fusion:
         """
         Count, per pair of published tracks, the consecutive steps they look like one person.
 
-        Alike: mean joint distance below ``merge_distance_m`` and no camera seeing both in
+        Alike: median joint distance below ``merge_distance_m`` and no camera seeing both in
         this step (one person tracked twice from disjoint views; two people side by side are
         seen by the same cameras). ``_merge_duplicates`` acts on the count next step.
         """
         cfg, tr = self.config, self.tracker.tracks
         live = np.nonzero(tr.state != _TENTATIVE_TRACK)[0]
         if len(live) < 2 or cfg.merge_distance_m <= 0:
-            self._duplicates.clear()
-            return
-        # the centres first (cheap): mean joint distances below the merge distance need
-        # centres within about as much
-        centre = centroid(tr.pose[live])
-        d = centre[:, None] - centre[None]
-        with np.errstate(invalid='ignore'):
-            near = (d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2
-        if not (near & _upper_triangle(len(live))).any():
-            self._duplicates.clear()
-            return
-        dist = median_joint_distance(tr.pose[live], tr.pose[live], cfg.min_shared_joints)
-        close = (dist < cfg.merge_distance_m) & _upper_triangle(len(live))
-        if not close.any():
             self._duplicates.clear()
             return
         cams = np.zeros((len(tr), len(self.cameras)), dtype=bool)
@@ -612,13 +613,29 @@ class Fusion:
             cams[has] = members[det[has]] >= 0
         if rays is not None:
             cams |= rays.cameras
+        # pairs no camera saw both of now (two people side by side share cameras): the
+        # common case of a complete set has none, and costs one product
+        c = cams[live].astype(np.float64)
+        apart = (c @ c.T == 0) & _upper_triangle(len(live))
+        if not apart.any():
+            self._duplicates.clear()
+            return
+        # the centres next (cheap): mean joint distances below the merge distance need
+        # centres within about as much
+        centre = centroid(tr.pose[live])
+        d = centre[:, None] - centre[None]
+        with np.errstate(invalid='ignore'):
+            apart &= (d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2
+        if not apart.any():
+            self._duplicates.clear()
+            return
+        dist = median_joint_distance(tr.pose[live], tr.pose[live], cfg.min_shared_joints)
+        close = (dist < cfg.merge_distance_m) & apart
         ids = tr.ids.tolist()
         alike = {}
         for i, j in zip(*np.nonzero(close)):
-            a, b = live[i], live[j]
-            if not (cams[a] & cams[b]).any():
-                key = (ids[a], ids[b])
-                alike[key] = self._duplicates.get(key, 0) + 1
+            key = (ids[live[i]], ids[live[j]])
+            alike[key] = self._duplicates.get(key, 0) + 1
         self._duplicates = alike
 
     def _merge_duplicates(self) -> Optional[Tracks]:
@@ -862,8 +879,15 @@ class Fusion:
     def _merge(self, tri: Triangulation, members: np.ndarray):
         """Merge candidates closer than merge_distance_m seen by disjoint cameras; else NMS."""
         cfg = self.config
+        centre = centroid(tri.joints)                 # cheap first: centres far apart
+        d = centre[:, None] - centre[None]
+        with np.errstate(invalid='ignore'):
+            near = ((d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2) \
+                & _upper_triangle(len(centre))
+        if not near.any():
+            return members, 0
         dist = median_joint_distance(tri.joints, tri.joints, cfg.min_shared_joints)
-        close = (dist < cfg.merge_distance_m) & _upper_triangle(len(dist))
+        close = (dist < cfg.merge_distance_m) & near
         if not close.any():
             return members, 0
         ii, jj = np.nonzero(close)
