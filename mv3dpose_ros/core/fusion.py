@@ -83,6 +83,9 @@ VIEW_PAIR_S = 0.5
 #: A single view's pose may be at most this much larger or smaller than the track projected
 #: into its camera (about +-35 % in depth): a bystander on the same line of sight is not.
 VIEW_SCALE_RATIO = 1.4
+# Poses whose joint centres are further apart than the merge distance plus this [m] are not
+# compared joint by joint (a cheap test first; a few wild joints move a centre, so generous).
+_CENTRE_MARGIN_M = 1.0
 # Extra per-axis variance of a root taken from the body instead of the hips [m^2]: (15 cm)^2.
 _BODY_ROOT_VARIANCE = 0.15 ** 2
 
@@ -406,9 +409,10 @@ class Fusion:
         from_member = assigned >= 0
         used = np.zeros(num_n + 1, dtype=bool)
         used[assigned[from_member]] = True
-        # a pose left over goes to a track no 3D pose matched (a CONFIRMED or COASTING one:
-        # a single view confirms no new track)
-        eligible = (tr.state != _TENTATIVE_TRACK) & ~has
+        # a pose left over goes to a track no 3D pose matched; to a TENTATIVE one only in a
+        # set that misses a camera, where a new person's sets rarely hold two views (in a
+        # complete set, a TENTATIVE track no pose matched is more likely a ghost)
+        eligible = ~has if sparse else (tr.state != _TENTATIVE_TRACK) & ~has
         flipped = np.zeros((num_t, len(self.cameras)), dtype=bool)
         pred = None
         for c, (lo, hi) in enumerate(zip(offsets, offsets[1:])):
@@ -485,7 +489,8 @@ class Fusion:
         a, b = centroid(poses), centroid(pred)        # cheap first: centres far apart
         d = a[:, None] - b[None]
         with np.errstate(invalid='ignore'):
-            maybe = ((d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2).any(axis=1)
+            maybe = ((d * d).sum(axis=-1)
+                     < (cfg.merge_distance_m + _CENTRE_MARGIN_M) ** 2).any(axis=1)
         out = np.zeros(len(poses), dtype=bool)
         if maybe.any():
             near = median_joint_distance(poses[maybe], pred, cfg.min_shared_joints)
@@ -625,7 +630,7 @@ class Fusion:
         centre = centroid(tr.pose[live])
         d = centre[:, None] - centre[None]
         with np.errstate(invalid='ignore'):
-            apart &= (d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2
+            apart &= (d * d).sum(axis=-1) < (cfg.merge_distance_m + _CENTRE_MARGIN_M) ** 2
         if not apart.any():
             self._duplicates.clear()
             return
@@ -882,7 +887,7 @@ class Fusion:
         centre = centroid(tri.joints)                 # cheap first: centres far apart
         d = centre[:, None] - centre[None]
         with np.errstate(invalid='ignore'):
-            near = ((d * d).sum(axis=-1) < (cfg.merge_distance_m + 0.3) ** 2) \
+            near = ((d * d).sum(axis=-1) < (cfg.merge_distance_m + _CENTRE_MARGIN_M) ** 2) \
                 & _upper_triangle(len(centre))
         if not near.any():
             return members, 0
