@@ -30,13 +30,20 @@ and the offline command both call it, so their results agree frame for frame.
 
 A new track that is well supported (``confirm_at_birth_ratio`` of the layout's joints
 triangulated from at least min(3, cameras) views) is CONFIRMED from its first frame; others
-wait for ``confirm_hits`` observations.
+wait for ``confirm_hits`` observations, one of them a pose of min(3, cameras - 1) views.
 
 New tracks start only from candidates inside the rig's shared field of view (their centroid
-in the images of ``min_birth_cameras_in_view`` cameras) and detected by at least
-``min_birth_view_ratio`` of the cameras that should see them; this keeps bystanders outside
-the working volume and two-view "ghost" pairings from becoming tracks. Existing tracks are
-updated by any candidate.
+in the images of ``min_birth_cameras_in_view`` cameras), detected by at least
+``min_birth_view_ratio`` of the cameras of the set that should see them, and not within
+``merge_distance_m`` of a track (a fragment of a tracked person); this keeps bystanders
+outside the working volume and two-view "ghost" pairings from becoming tracks. Existing
+tracks are updated by any candidate.
+
+Every observation counts (``view_updates``): 2D keypoints no triangulation used (a person one
+camera of the set saw, a joint one view saw, a message late for its set: ``update_view``)
+update the tracks they belong to as rays (``JointKalman.update_rays``); see
+``docs/sparse-views.md``. Tracks lost for up to ``max_coast_s`` are found again with their id,
+and two tracks of one person are merged into the older.
 
 Units: thresholds on image distances are in normalised image units (pixels / focal length;
 0.045 = 45 px at f = 1000 px), 3D distances in metres, times in seconds (field names say so).
@@ -1060,7 +1067,7 @@ class _Rays:
     point: np.ndarray       # [T, J, 3] the first accepted ray's point nearest the prediction
     variance: np.ndarray    # [T, J] its variance across the ray [m^2]
     views: np.ndarray       # [T, J] views that updated the joint
-    cameras: np.ndarray     # [T, C] cameras whose pose went to the track as a single view
+    cameras: np.ndarray     # [T, C] cameras whose pose went to the track (member or single)
 
 
 def _spread_ratio(proj: np.ndarray, poses: np.ndarray) -> np.ndarray:

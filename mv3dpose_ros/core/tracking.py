@@ -19,25 +19,30 @@ Each set of 3D poses is matched to the live tracks by a gated Hungarian solve. T
 (track, pose) pair is the mean Euclidean distance over the joints both have (at least
 ``min_shared_joints``); with fewer shared joints it is the distance of their joint centroids
 on the ground plane (x, y; world z is up). A pair is accepted below the gate
-``gate_m + gate_growth_mps * (time since the track was last observed)``: the paper's
-tau = 0.2 m between consecutive frames, widened for tracks that were not seen for a while and
-for low frame rates. Tracks and poses left over are matched once more with the wider
-``recovery_gate_m`` before new tracks start, so one noisy pose does not fork a track.
+``gate_m + gate_growth_mps * (time since a 3D pose last matched the track)``: the paper's
+tau = 0.2 m between consecutive frames, widened for tracks that were not located for a while
+(single views keep a track observed but leave its depth open) and for low frame rates. Tracks
+and poses left over are matched once more with the wider ``recovery_gate_m`` before new
+tracks start, so one noisy pose does not fork a track. Tracks unobserved for more than
+``lost_after_s`` are matched last (gate, then recovery gate) to the poses left: a stale track
+with a wide gate never takes a person a fresh track follows.
 
 Motion comes from the filtered state, never from raw observations: every track's joints run
 through per-joint Kalman filters (``core.smoothing.JointKalman``, which rejects single-frame
 outliers by an innovation gate), the track's pose is the filtered (held) pose, and its body
 velocity is the inverse-variance mean of the filtered joint velocities. With ``predict`` each
 track is moved by that velocity before matching, so walking people stay inside the gate at
-low frame rates. A pose matched only by the wider recovery gate updates the joints (through
-their own gates) but not the body velocity.
+low frame rates (at most ``max_predict_s`` of motion). A pose matched only by the wider
+recovery gate updates the joints (through their own gates) but not the body velocity; a track
+found after being lost restarts its velocity.
 
 Life cycle: a new track is TENTATIVE, or CONFIRMED at once when the caller says it is well
 supported (``confirm_at_birth``); after ``confirm_hits`` observations it is CONFIRMED; a
 confirmed track that misses a set is COASTING until it is observed again (CONFIRMED). A track
 not observed for more than ``max_coast_s`` is DELETED whatever the gate would accept: it takes
-no part in matching any more. A TENTATIVE track that misses sets for longer than
-``tentative_coast_s`` (0: any set) is DELETED. Ids
+no part in matching any more. A TENTATIVE track that misses a set is DELETED, unless the set
+missed cameras (``update(sparse=True)``) and the track was seen within ``tentative_coast_s``;
+confirmation also needs one matched pose of ``confirm_views`` views (``update(views=...)``). Ids
 start at 1 and are never reused by a tracker, not even after ``reset``.
 
 Tracks are kept as a structure of arrays (``Tracks``), so an update costs the same few numpy
