@@ -52,6 +52,8 @@ def _add_track(fusion, pose, stamp):
     fusion._confidence = np.vstack((fusion._confidence, np.ones((1, num_j))))
     fusion._view_time = np.vstack((fusion._view_time, np.full((1, len(fusion.cameras)),
                                                               -np.inf)))
+    fusion._triangulated_by = np.vstack((fusion._triangulated_by,
+                                         np.zeros((1, len(fusion.cameras)), dtype=bool)))
     return int(tr.tracks.ids[n])
 
 
@@ -157,6 +159,22 @@ def test_two_cameras_in_alternate_sets_keep_a_person_located():
         else:
             alone.step(views, stamp)
     assert TrackState.CONFIRMED not in states       # one camera at a time, unpaired: coasting
+
+
+def test_a_person_seen_in_sets_of_two_cameras_confirms_when_the_pairs_change():
+    """Confirmation needs 3 cameras of 4 behind the 3D poses: together, not in one set."""
+    scene = _scene(num_people=1, num_frames=12)
+    cams = list(scene.cameras)
+    states = {}
+    for name, pairs in (('alternating', (cams[:2], cams[2:])), ('one pair', (cams[:2],))):
+        fusion = Fusion(scene.cameras, scene.layout)
+        for f, (stamp, views) in enumerate(scene.frames()):
+            pair = pairs[f % len(pairs)]
+            out = fusion.step({c: views[c] for c in pair}, stamp)
+        states[name] = {t.state for t in out if t.state != TrackState.DELETED}
+    assert states['alternating'] == {TrackState.CONFIRMED}
+    # the same two detections every set: what a two-view ghost looks like, never confirmed
+    assert states['one pair'] == {TrackState.TENTATIVE}
 
 
 def test_single_views_do_better_than_sets_when_camera_frames_are_dropped():
