@@ -42,7 +42,8 @@ confirmed track that misses a set is COASTING until it is observed again (CONFIR
 not observed for more than ``max_coast_s`` is DELETED whatever the gate would accept: it takes
 no part in matching any more. A TENTATIVE track that misses a set is DELETED, unless the set
 missed cameras (``update(sparse=True)``) and the track was seen within ``tentative_coast_s``;
-confirmation also needs one matched pose of ``confirm_views`` views (``update(views=...)``). Ids
+confirmation also needs ``confirm_views`` cameras behind its 3D poses (``update(views=...)``),
+or four times the hits. Ids
 start at 1 and are never reused by a tracker, not even after ``reset``.
 
 Tracks are kept as a structure of arrays (``Tracks``), so an update costs the same few numpy
@@ -64,6 +65,10 @@ _XYZ = np.ones(3)
 _TENTATIVE, _CONFIRMED, _COASTING = (np.int8(s) for s in (
     TrackState.TENTATIVE, TrackState.CONFIRMED, TrackState.COASTING))
 
+
+#: A TENTATIVE track short of ``confirm_views`` cameras confirms after this many times
+#: ``confirm_hits`` observations (see ``Tracker._confirmable``).
+LONG_CONFIRM_FACTOR = 4
 
 _NONE = np.zeros(0, dtype=np.int64)       # no rows (read-only)
 _NONE.setflags(write=False)
@@ -388,8 +393,7 @@ class Tracker:
         tr.missed[current] = 0
         tr.hits[current] += 1
         confirm = current[(tr.state[current] == _COASTING)
-                          | ((tr.hits[current] >= self.config.confirm_hits)
-                             & (tr.support[current] >= self.config.confirm_views))]
+                          | self._confirmable(tr.hits[current], tr.support[current])]
         tr.state[confirm] = _CONFIRMED
         self.refresh(rows)
 
@@ -400,6 +404,19 @@ class Tracker:
         tr.pose[rows] = np.where(known[..., None], self.filter.x[rows], tr.pose[rows])
         velocity = self.filter.body_velocity()[rows]
         tr.velocity[rows] = np.where(np.isnan(velocity), tr.velocity[rows], velocity)
+
+    def _confirmable(self, hits: np.ndarray, support: np.ndarray) -> np.ndarray:
+        """
+        Tell which TENTATIVE tracks have earned confirmation.
+
+        ``confirm_hits`` observations once ``confirm_views`` cameras stood behind its 3D poses;
+        with fewer (a person the other cameras never see, or a ghost pairing the same two
+        wrong detections) ``LONG_CONFIRM_FACTOR`` times as many: a ghost of a passing
+        coincidence does not last that long, a person does.
+        """
+        cfg = self.config
+        return ((hits >= cfg.confirm_hits) & (support >= cfg.confirm_views)) \
+            | (hits >= LONG_CONFIRM_FACTOR * cfg.confirm_hits)
 
     def remove(self, rows: np.ndarray) -> Tracks:
         """Delete tracks ``rows`` now (e.g. a duplicate merged into another); return them."""
@@ -441,8 +458,7 @@ class Tracker:
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
             tr.last_observed_ns = np.where(hit, stamp_ns, tr.last_observed_ns)
             tr.last_matched = np.where(hit, stamp, tr.last_matched)
-        confirm = (tr.state == _COASTING) | ((tr.hits >= self.config.confirm_hits)
-                                             & (tr.support >= self.config.confirm_views))
+        confirm = (tr.state == _COASTING) | self._confirmable(tr.hits, tr.support)
         if not all_hit:
             confirm &= hit
         tr.state = np.where(confirm, _CONFIRMED, tr.state)
