@@ -38,6 +38,16 @@ def shared_data():
     return SHARED_DATA
 
 
+@pytest.fixture(scope='session')
+def model():
+    """Path of the default pose model; tests that run it skip with a reason when not fetched."""
+    from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
+    try:
+        return resolve_model_path('yolo11n-pose')
+    except ModelNotFound as exc:
+        pytest.skip(str(exc))
+
+
 @pytest.fixture
 def ros_context():
     """Provide an initialised rclpy context of its own, shut down after the test."""

@@ -34,15 +34,6 @@ def mv3dpose(*args, timeout=300):
                           capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.fixture(scope='module')
-def model():
-    from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
-    try:
-        return resolve_model_path('yolo11n-pose')
-    except ModelNotFound as exc:
-        pytest.skip(str(exc))
-
-
 @pytest.mark.slow
 def test_detect_then_track_finds_the_three_people(shared_data, model, tmp_path):
     demo = os.path.join(shared_data, 'panoptic_demo')

@@ -18,28 +18,23 @@ fusion_node with inputs whose image size is not the calibration's (issue 25, ite
 A portrait rig calibrated at 1088x1920, as the Pose2Sim rig, whose first two cameras deliver
 1080x1920 video (a codec's crop) and whose third runs on a half-size stream: all are used. A
 landscape image against the portrait calibration is dropped as 'image_size'. The DDS harness
-follows test_fusion_node.py's; every wait is bounded by a timeout.
+is test_fusion_node.py's; every wait is bounded by a timeout.
 """
 
-import time
-
-from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.fusion import Fusion, FusionConfig
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.ros.images import camera_info_from_camera
 from mv3dpose_ros.ros.messages import (msg_to_tracks, ns_to_stamp, numpy_to_person2d_array,
                                        stamp_to_ns)
-from mv3dpose_ros.ros.qos import reliable_qos, sensor_qos
+from mv3dpose_ros.ros.qos import sensor_qos
 from mv3dpose_ros.sim import make_scene
 from mv3dpose_ros.sim.rig import RigConfig
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
+from test_fusion_node import base_ns, Harness  # noqa: I100 - the DDS harness of fusion_node
 
 pytestmark = [pytest.mark.ros]
 
@@ -48,60 +43,6 @@ NS = 1_000_000_000
 FRAMES = 20
 CROPPED = ('cam_01', 'cam_02')     # 1080x1920 images of the 1088x1920 calibration
 HALF = 'cam_03'                    # 544x960: a resized stream
-
-
-class Harness:
-    """A FusionNode and a probe publishing per camera (as test_fusion_node.Harness)."""
-
-    def __init__(self, scene, rig_path, **params):
-        from mv3dpose_ros.nodes.fusion_node import FusionNode
-        self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx)
-        overrides = {'rig_config': rig_path, 'log_throttle_s': 0.0, 'sync.max_wait_s': 0.5,
-                     'publish_tentative': True}
-        overrides.update(params)
-        self.node = FusionNode(context=self.ctx, parameter_overrides=[
-            Parameter(k, value=v) for k, v in overrides.items()])
-        self.probe = rclpy.create_node('probe', context=self.ctx)
-        self.pubs = {c: self.probe.create_publisher(Person2DArray, f'/{c}/persons_2d',
-                                                    reliable_qos(100))
-                     for c in scene.cameras}
-        self.tracks = []
-        self.probe.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks',
-                                       self.tracks.append, reliable_qos(500))
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.probe)
-        assert self.spin_until(lambda: all(p.get_subscription_count() for p in
-                                           self.pubs.values())), 'fusion_node never matched'
-
-    def spin_until(self, predicate, timeout=10.0):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            self.executor.spin_once(timeout_sec=0.02)
-        return bool(predicate())
-
-    def publish(self, cam, msg):
-        self.pubs[cam].publish(msg)
-        for _ in range(2):
-            self.executor.spin_once(timeout_sec=0.0)
-
-    def wait_sets(self, count, timeout=10.0):
-        return self.spin_until(lambda: self.node.counts['sets'] >= count and
-                               len(self.tracks) >= self.node.counts['sets'], timeout)
-
-    def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.probe.destroy_node()
-        rclpy.shutdown(context=self.ctx)
-
-
-def base_ns(num_frames: int) -> int:
-    """Stamp of frame 0: the sequence ends ~0.5 s before now (stamps in the recent past)."""
-    return time.time_ns() - int((num_frames / FPS + 0.5) * NS)
 
 
 @pytest.fixture(scope='module')
@@ -117,7 +58,7 @@ def portrait(tmp_path_factory):
 
 @pytest.fixture
 def harness(portrait):
-    h = Harness(*portrait)
+    h = Harness(*portrait, publish_tentative=True)
     yield h
     h.close()
 
@@ -191,7 +132,7 @@ def test_rotated_image_dropped_naming_the_parameter(harness, portrait):
 def test_camera_info_size_is_what_inputs_are_checked_against(portrait):
     """A CameraInfo of another size than the rig file replaces the camera, size included."""
     scene, path = portrait
-    h = Harness(scene, path, intrinsics_source='camera_info')
+    h = Harness(scene, path, publish_tentative=True, intrinsics_source='camera_info')
     try:
         info_pubs = {c: h.probe.create_publisher(CameraInfo, f'/{c}/camera_info',
                                                  sensor_qos('reliable', 1))

@@ -40,15 +40,6 @@ NS = 1_000_000_000
 ENCODINGS = {'00_03': 'bgr8', '00_06': 'yuv422_yuy2', '00_12': 'bgra8'}
 
 
-@pytest.fixture(scope='module')
-def model():
-    from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
-    try:
-        return resolve_model_path('yolo11n-pose')
-    except ModelNotFound as exc:
-        pytest.skip(str(exc))
-
-
 def _start(cmd, log, shell=False):
     return subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
                             start_new_session=True, shell=shell,
@@ -145,11 +136,16 @@ def test_free_running_rig_tracks_most_sets(shared_data, model, tmp_path):
         assert not rejected, (cam, rejected, report)
 
 
-def _readme_recipe() -> str:
+def readme_block(marker: str) -> str:
+    """Return the bash block of README.md after ``<!-- MARKER ... -->`` (run as typed)."""
     text = open(os.path.join(ROOT, 'README.md'), encoding='utf-8').read()
-    m = re.search(r'<!-- rig-recipe[^>]*-->\n```bash\n(.*?)```', text, re.S)
-    assert m, 'README.md has no rig-recipe block'
+    m = re.search(rf'<!-- {marker}[^>]*-->\n```bash\n(.*?)```', text, re.S)
+    assert m, f'README.md has no {marker} block'
     return m.group(1)
+
+
+def _readme_recipe() -> str:
+    return readme_block('rig-recipe')
 
 
 def test_readme_recipe_uses_the_installed_names():

@@ -60,7 +60,6 @@ import collections
 import json
 import math
 import os
-import re
 import sys
 import time
 from typing import Dict, List
@@ -72,7 +71,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'bench'))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import bench_rig  # noqa: E402, I100 - bench/ is no package
-from test_live_rig import _start, _stop_group  # noqa: E402, I100 - same process handling
+from test_live_rig import _start, _stop_group, readme_block  # noqa: E402, I100 - shared
 
 NS = 1_000_000_000
 CAMERAS = {'cam_01': 'cam01.mp4', 'cam_02': 'cam02.mp4', 'cam_03': 'cam03.mp4',
@@ -113,21 +112,9 @@ class _TracksProbe(bench_rig.Probe):
             self.messages.append((self._stamp(msg.header), now, skeletons))
 
 
-@pytest.fixture(scope='module')
-def model():
-    from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
-    try:
-        return resolve_model_path('yolo11n-pose')
-    except ModelNotFound as exc:
-        pytest.skip(str(exc))
-
-
 def readme_video_recipe() -> str:
     """Return the README's recorded-video rig recipe (the block this test runs as typed)."""
-    text = open(os.path.join(ROOT, 'README.md'), encoding='utf-8').read()
-    m = re.search(r'<!-- video-rig-recipe[^>]*-->\n```bash\n(.*?)```', text, re.S)
-    assert m, 'README.md has no video-rig-recipe block'
-    return m.group(1)
+    return readme_block('video-rig-recipe')
 
 
 def test_readme_video_recipe_plays_the_videos_this_test_checks():
