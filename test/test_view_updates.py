@@ -52,8 +52,6 @@ def _add_track(fusion, pose, stamp):
     fusion._confidence = np.vstack((fusion._confidence, np.ones((1, num_j))))
     fusion._view_time = np.vstack((fusion._view_time, np.full((1, len(fusion.cameras)),
                                                               -np.inf)))
-    fusion._triangulated_by = np.vstack((fusion._triangulated_by,
-                                         np.zeros((1, len(fusion.cameras)), dtype=bool)))
     return int(tr.tracks.ids[n])
 
 

@@ -237,7 +237,7 @@ class Fusion:
             gate_chi2=cfg.innovation_gate_chi2, reinit_after=cfg.reinit_after,
             max_gap_s=cfg.max_gap_s, tentative_coast_s=cfg.tentative_coast_s,
             lost_after_s=max(cfg.publish_coast_s, 0.3),
-            confirm_views=max(2, min(3, num_c - 1))))
+            confirm_views=max(2, min(3, num_c - 1))), num_cameras=num_c)
         self._depth_rows = np.stack([np.append(c.R[2], c.t[2]) for c in self.cameras])  # [C, 4]
         self._strong_views = min(3, num_c)
         self._noise_views = min(3, num_c)         # 2-view residuals say little about noise
@@ -249,7 +249,6 @@ class Fusion:
         self._confidence = np.zeros((0, num_j))           # last observed confidence per track
         self._view_time = np.zeros((0, num_c))            # per track and camera: last stamp
         #                                                   it saw the track [s]
-        self._triangulated_by = np.zeros((0, num_c), dtype=bool)   # cameras of its 3D poses
         #: 3D poses ``[K, J, 3]`` triangulated in the last step, before tracking.
         self.last_poses = np.empty((0, num_j, 3))
         #: ``[K, C]`` index of the input 2D pose (in ``views[camera]``) behind each of
@@ -273,7 +272,6 @@ class Fusion:
         dropped = self._tombstones(self.tracker.reset())
         self._confidence = np.zeros((0, self.layout.num_joints))
         self._view_time = np.zeros((0, len(self.cameras)))
-        self._triangulated_by = np.zeros((0, len(self.cameras)), dtype=bool)
         self._duplicates.clear()
         self._last_stamp = None
         return dropped
@@ -331,7 +329,7 @@ class Fusion:
         lost = tr.ids[stamp - tr.last_observed > cfg.publish_coast_s + 1e-9]
         sparse = any(views.get(n) is None for n in self.camera_names)
         upd = self.tracker.update(tri.joints, stamp, can_birth, variance, strong, stamp_ns,
-                                  views=(members >= 0).sum(axis=1), sparse=sparse)
+                                  cameras=members >= 0, sparse=sparse)
         self._note_views(upd, members, stamp)
         rays = None
         if cfg.view_updates and len(self.tracker.tracks):
@@ -521,27 +519,18 @@ class Fusion:
     def _note_views(self, upd, members: np.ndarray, stamp: float) -> None:
         """Follow the tracks' rows with the per-camera view times; note this set's 3D ones."""
         previous = upd.previous
-        old, by = self._view_time, self._triangulated_by
+        old = self._view_time
         if len(previous) != len(old) or previous.tolist() != list(range(len(old))):
             self._view_time = np.full((len(previous), len(self.cameras)), -np.inf)
-            self._triangulated_by = np.zeros((len(previous), len(self.cameras)), dtype=bool)
             kept = previous >= 0
             if kept.any():
                 self._view_time[kept] = old[previous[kept]]
-                self._triangulated_by[kept] = by[previous[kept]]
         det = upd.detection
         has = det >= 0
         if has.any():
             rows = np.nonzero(has)[0]
             seen = members[det[rows]] >= 0
             self._view_time[rows] = np.where(seen, stamp, self._view_time[rows])
-            # Confirmation support: the cameras of all its 3D poses together, so a person a
-            # loaded rig only ever sees in sets of two cameras (different pairs) confirms; a
-            # ghost pairing the same two detections again and again does not.
-            self._triangulated_by[rows] |= seen
-            tr = self.tracker.tracks
-            tr.support[rows] = np.maximum(tr.support[rows],
-                                          self._triangulated_by[rows].sum(axis=1))
 
     def _paired_views(self, rows: np.ndarray, cam: int, stamp: float) -> np.ndarray:
         """
@@ -680,7 +669,6 @@ class Fusion:
         self._confidence = self._confidence[keep] if len(self._confidence) == len(tr) \
             else self._confidence
         self._view_time = self._view_time[keep]
-        self._triangulated_by = self._triangulated_by[keep]
         self.counts['merged_tracks'] += len(rows)
         return self.tracker.remove(rows)
 

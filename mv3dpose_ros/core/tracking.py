@@ -42,8 +42,8 @@ confirmed track that misses a set is COASTING until it is observed again (CONFIR
 not observed for more than ``max_coast_s`` is DELETED whatever the gate would accept: it takes
 no part in matching any more. A TENTATIVE track that misses a set is DELETED, unless the set
 missed cameras (``update(sparse=True)``) and the track was seen within ``tentative_coast_s``;
-confirmation also needs ``confirm_views`` cameras behind its 3D poses (``update(views=...)``),
-or four times the hits. Ids
+confirmation also needs ``confirm_views`` cameras behind its 3D poses, together
+(``update(cameras=...)``), or four times the hits. Ids
 start at 1 and are never reused by a tracker, not even after ``reset``.
 
 Tracks are kept as a structure of arrays (``Tracks``), so an update costs the same few numpy
@@ -92,7 +92,7 @@ class TrackerConfig:
     lost_after_s: float = 0.5           # tracks unobserved longer match only what is left
     tentative_coast_s: float = 0.0      # a TENTATIVE track survives sparse sets without it
     #                                     this long (``update(sparse=True)``)
-    confirm_views: int = 0              # views a matched pose must once have had to confirm
+    confirm_views: int = 0              # cameras behind a track's 3D poses to confirm it
     # per-joint Kalman filters (core.smoothing.JointKalman)
     accel_noise: float = 2.0            # white acceleration noise density [m^2/s^3]
     init_speed_mps: float = 1.0         # prior std of a new joint's velocity (starts at 0)
@@ -115,19 +115,19 @@ class Tracks:
     first_seen_ns: np.ndarray   # [T] int64 ns, the same stamps exactly
     last_observed_ns: np.ndarray    # [T] int64 ns
     last_matched: np.ndarray    # [T] s, last stamp a 3D pose matched (not a single view)
-    support: np.ndarray         # [T] most views of a 3D pose matched (confirmation needs enough)
+    cameras: np.ndarray         # [T, C] bool, the cameras behind its matched 3D poses, together
     hits: np.ndarray            # [T] observations
     missed: np.ndarray          # [T] consecutive updates without observation
 
     @classmethod
-    def empty(cls, num_joints: int) -> 'Tracks':
+    def empty(cls, num_joints: int, num_cameras: int = 0) -> 'Tracks':
         """Return zero tracks."""
         return cls(ids=np.zeros(0, dtype=np.int64), state=np.zeros(0, dtype=np.int8),
                    pose=np.zeros((0, num_joints, 3)), velocity=np.zeros((0, 3)),
                    first_seen=np.zeros(0), last_observed=np.zeros(0),
                    first_seen_ns=np.zeros(0, dtype=np.int64),
                    last_observed_ns=np.zeros(0, dtype=np.int64), last_matched=np.zeros(0),
-                   support=np.zeros(0, dtype=np.int64),
+                   cameras=np.zeros((0, num_cameras), dtype=bool),
                    hits=np.zeros(0, dtype=np.int64), missed=np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
@@ -216,17 +216,19 @@ def median_joint_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int =
 class Tracker:
     """Assign 3D poses to tracks over time, filter their joints and run their life cycle."""
 
-    def __init__(self, num_joints: int, config: Optional[TrackerConfig] = None) -> None:
-        """Create an empty tracker for poses of ``num_joints`` joints."""
+    def __init__(self, num_joints: int, config: Optional[TrackerConfig] = None,
+                 num_cameras: int = 0) -> None:
+        """Create an empty tracker for poses of ``num_joints`` joints from ``num_cameras``."""
         self.config = config or TrackerConfig()
         self.num_joints = int(num_joints)
+        self.num_cameras = int(num_cameras)
         self.next_id = 1
         self._stamp: Optional[float] = None     # stamp of the last update
         self._clear()
 
     def _clear(self) -> None:
         cfg = self.config
-        self.tracks = Tracks.empty(self.num_joints)
+        self.tracks = Tracks.empty(self.num_joints, self.num_cameras)
         self.filter = JointKalman(self.num_joints, cfg.accel_noise, cfg.init_speed_mps,
                                   cfg.gate_chi2, cfg.reinit_after, cfg.max_gap_s)
 
@@ -239,7 +241,7 @@ class Tracker:
 
     def update(self, poses: np.ndarray, stamp: float, can_birth: BirthRule = None,
                variance: Optional[np.ndarray] = None, confirm_at_birth: BirthRule = None,
-               stamp_ns: Optional[int] = None, views: Optional[np.ndarray] = None,
+               stamp_ns: Optional[int] = None, cameras: Optional[np.ndarray] = None,
                sparse: bool = True) -> TrackUpdate:
         """
         Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
@@ -252,8 +254,10 @@ class Tracker:
         ``confirm_at_birth`` holds. Both rules may also be functions of the indices ``[N]`` of
         the candidate poses returning ``[N]`` booleans, so their work is only done when there
         are any. ``stamp_ns`` is the same stamp in integer nanoseconds (default: rounded).
-        ``views [D]`` counts the cameras behind each pose: a TENTATIVE track is confirmed by
-        ``confirm_hits`` only once a pose of ``confirm_views`` views matched it. ``sparse``:
+        ``cameras [D, C]`` are the cameras behind each pose: a TENTATIVE track is confirmed by
+        ``confirm_hits`` only once ``confirm_views`` cameras stood behind its poses, together
+        (a person a loaded rig only sees in sets of two cameras, different pairs, confirms;
+        the same two detections again and again, a ghost's signature, do not). ``sparse``:
         some cameras are missing from these poses, so a TENTATIVE track not matched now may
         wait ``tentative_coast_s`` (a complete set that does not see it deletes it).
         """
@@ -302,13 +306,18 @@ class Tracker:
                 recovered[rows] = second
         hit = det >= 0
         all_hit = bool(hit.all())
-        if num_t and num_d and views is not None:
-            tr.support = np.where(hit, np.maximum(tr.support, views[np.maximum(det, 0)]),
-                                  tr.support)
         if num_t:
-            self._observe(hit, stamp, stamp_ns, all_hit)
+            now = None
+            if num_d and cameras is not None:
+                now = cameras[np.maximum(det, 0)] & hit[:, None]
+            # this set's confirmations count its pose's cameras and the earlier ones', each
+            # on its own; the union counts from the next observation on
+            self._observe(hit, stamp, stamp_ns, all_hit, now)
+            if now is not None:
+                tr.cameras = tr.cameras | now
         if all_hit:                                 # the common case: nobody missed
-            deleted, kept, live = Tracks.empty(self.num_joints), np.arange(num_t), tr
+            deleted, kept, live = (Tracks.empty(self.num_joints, self.num_cameras),
+                                   np.arange(num_t), tr)
         else:
             tentative = tr.state == _TENTATIVE
             wait = ~tentative | (sparse & (unseen <= cfg.tentative_coast_s + 1e-9))
@@ -334,8 +343,8 @@ class Tracker:
             confirm = np.zeros(len(new), dtype=bool)
             if confirm_at_birth is not None:
                 confirm = _rule(confirm_at_birth, np.ones(len(new), dtype=bool), new)
-            support = views[new] if views is not None else None
-            live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm, support))
+            seen = cameras[new] if cameras is not None else None
+            live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm, seen))
             det = np.concatenate((det, new))
             previous = np.concatenate((kept, np.full(len(new), -1)))
             recovered = np.concatenate((recovered, np.zeros(len(new), dtype=np.int8)))
@@ -392,8 +401,8 @@ class Tracker:
         current = now[tr.missed[now] > 0] if self._stamp == stamp else now[:0]
         tr.missed[current] = 0
         tr.hits[current] += 1
-        confirm = current[(tr.state[current] == _COASTING)
-                          | self._confirmable(tr.hits[current], tr.support[current])]
+        earned = self._confirmable(tr.hits[current], tr.cameras[current].sum(axis=1))
+        confirm = current[(tr.state[current] == _COASTING) | earned]
         tr.state[confirm] = _CONFIRMED
         self.refresh(rows)
 
@@ -405,9 +414,9 @@ class Tracker:
         velocity = self.filter.body_velocity()[rows]
         tr.velocity[rows] = np.where(np.isnan(velocity), tr.velocity[rows], velocity)
 
-    def _confirmable(self, hits: np.ndarray, support: np.ndarray) -> np.ndarray:
+    def _confirmable(self, hits: np.ndarray, cameras: np.ndarray) -> np.ndarray:
         """
-        Tell which TENTATIVE tracks have earned confirmation.
+        Tell which TENTATIVE tracks, of ``hits`` observations and ``cameras`` (counts), confirm.
 
         ``confirm_hits`` observations once ``confirm_views`` cameras stood behind its 3D poses;
         with fewer (a person the other cameras never see, or a ghost pairing the same two
@@ -415,7 +424,7 @@ class Tracker:
         coincidence does not last that long, a person does.
         """
         cfg = self.config
-        return ((hits >= cfg.confirm_hits) & (support >= cfg.confirm_views)) \
+        return ((hits >= cfg.confirm_hits) & (cameras >= cfg.confirm_views)) \
             | (hits >= LONG_CONFIRM_FACTOR * cfg.confirm_hits)
 
     def remove(self, rows: np.ndarray) -> Tracks:
@@ -429,9 +438,10 @@ class Tracker:
         return dead
 
     def _births(self, n: int, stamp: float, stamp_ns: int, confirm: np.ndarray,
-                support: Optional[np.ndarray] = None) -> Tracks:
-        support = np.zeros(n, dtype=np.int64) if support is None else support
-        instant = (self.config.confirm_hits <= 1) & (support >= self.config.confirm_views)
+                cameras: Optional[np.ndarray] = None) -> Tracks:
+        if cameras is None:
+            cameras = np.zeros((n, self.num_cameras), dtype=bool)
+        instant = self._confirmable(np.ones(n, dtype=np.int64), cameras.sum(axis=1))
         state = np.where(confirm | instant, _CONFIRMED, _TENTATIVE).astype(np.int8)
         ids = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
         self.next_id += n
@@ -440,12 +450,16 @@ class Tracker:
                       last_observed=np.full(n, stamp),
                       first_seen_ns=np.full(n, stamp_ns, dtype=np.int64),
                       last_observed_ns=np.full(n, stamp_ns, dtype=np.int64),
-                      last_matched=np.full(n, stamp), support=support,
+                      last_matched=np.full(n, stamp), cameras=cameras,
                       hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
 
     def _observe(self, hit: np.ndarray, stamp: float, stamp_ns: int,
-                 all_hit: bool = False) -> None:
-        """Count the observation of the tracks ``hit`` (mask; ``all_hit``: all)."""
+                 all_hit: bool = False, cameras: Optional[np.ndarray] = None) -> None:
+        """
+        Count the observation of the tracks ``hit`` (mask; ``all_hit``: all).
+
+        ``cameras [T, C]``: the cameras of the poses matched now (for confirmation).
+        """
         tr = self.tracks
         if all_hit:
             tr.hits = tr.hits + 1
@@ -458,7 +472,10 @@ class Tracker:
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
             tr.last_observed_ns = np.where(hit, stamp_ns, tr.last_observed_ns)
             tr.last_matched = np.where(hit, stamp, tr.last_matched)
-        confirm = (tr.state == _COASTING) | self._confirmable(tr.hits, tr.support)
+        count = tr.cameras.sum(axis=1)
+        if cameras is not None:
+            count = np.maximum(count, cameras.sum(axis=1))
+        confirm = (tr.state == _COASTING) | self._confirmable(tr.hits, count)
         if not all_hit:
             confirm &= hit
         tr.state = np.where(confirm, _CONFIRMED, tr.state)
