@@ -149,12 +149,8 @@ class JointKalman:
         dt = stamp - self.t                                       # inf for unknown joints
         live = (self.count > 0) & (dt <= self.max_gap_s + 1e-9)
         dt = np.where(live, np.maximum(dt, 0.0), 0.0)
-        q = self.q
-        qdt = q * dt
-        pxv = self.p_xv + dt * (self.p_vv + qdt / 2)
-        pxx = self.p_xx + dt * (self.p_xv + pxv - qdt * dt / 6)   # = + 2dt pxv + dt^2 pvv
-        pvv = self.p_vv + qdt                                     # + q dt^3 / 3
-        xp = self.x + self.v * dt[..., None]
+        xp, pxx, pxv, pvv = _predict(self.q, self.x, self.v, self.p_xx, self.p_xv, self.p_vv,
+                                     dt)
         with np.errstate(invalid='ignore'):
             resid = z - xp
             s = pxx + r
@@ -215,12 +211,8 @@ class JointKalman:
         seen = np.isfinite(direction[..., 0])
         live = (count > 0) & (dt >= -same_instant_s) & (dt <= self.max_gap_s + 1e-9) & seen
         dt = np.where(live, np.maximum(dt, 0.0), 0.0)
-        q = self.q
-        qdt = q * dt
-        pxv = self.p_xv[rows] + dt * (self.p_vv[rows] + qdt / 2)
-        pxx = self.p_xx[rows] + dt * (self.p_xv[rows] + pxv - qdt * dt / 6)
-        pvv = self.p_vv[rows] + qdt
-        xp = x + v * dt[..., None]
+        xp, pxx, pxv, pvv = _predict(self.q, x, v, self.p_xx[rows], self.p_xv[rows],
+                                     self.p_vv[rows], dt)
         with np.errstate(invalid='ignore'):
             w = xp - origin
             depth = (w * direction) @ _XYZ                        # along the ray, [N, J]
@@ -255,6 +247,16 @@ class JointKalman:
         with np.errstate(invalid='ignore', divide='ignore'):
             vel = (w[..., None] * self.v).sum(axis=1) / total[:, None]
         return np.where((total > 0)[:, None], vel, np.nan)
+
+
+def _predict(q: float, x: np.ndarray, v: np.ndarray, p_xx: np.ndarray, p_xv: np.ndarray,
+             p_vv: np.ndarray, dt: np.ndarray):
+    """Return the constant-velocity prediction ``(x, p_xx, p_xv, p_vv)`` ``dt`` ahead."""
+    qdt = q * dt
+    pxv = p_xv + dt * (p_vv + qdt / 2)
+    pxx = p_xx + dt * (p_xv + pxv - qdt * dt / 6)     # = + 2dt pxv + dt^2 pvv + q dt^3 / 3
+    pvv = p_vv + qdt
+    return x + v * dt[..., None], pxx, pxv, pvv
 
 
 def interpolate_gaps(traj: np.ndarray, max_gap: int) -> Tuple[np.ndarray, np.ndarray]:
