@@ -41,10 +41,10 @@ from mv3dpose_ros.core.fusion import Fusion
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.io.foxglove_ws import FoxgloveClient
-from mv3dpose_ros.ros.markers import track_color
 from mv3dpose_ros.ros.messages import person2d_array_to_numpy, stamp_to_ns, tracks_to_msg
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.ros.scene import frustum_points, latest_entities, render_scene
+from mv3dpose_ros.viz.palette import track_rgb
 import numpy as np
 import pytest
 import rclpy
@@ -232,7 +232,7 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
             want = np.array([[j.position.x, j.position.y, j.position.z] for j in valid])
             np.testing.assert_allclose(pts, want, atol=1e-9)
             assert len(line.get('indices', [])) <= 2 * len(bones)
-            r, g, b = track_color(tid)
+            r, g, b = track_rgb(tid)
             assert (line['color']['r'], line['color']['g'], line['color']['b']) == \
                 pytest.approx((r, g, b))
             assert e['texts'][0]['text'].startswith(f'#{tid} ')
@@ -252,7 +252,7 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
     # The picture of what the client received, drawn from the received scene messages only.
     ents = latest_entities([m.decoded for m in got if m.topic in (SCENE, CAMERAS)])
     picture = render_scene(ents, f'Foxglove client: {len(scene_rx)} scene updates received')
-    colours = {tuple(int(round(255 * c)) for c in reversed(track_color(int(i.split('/')[1]))))
+    colours = {tuple(int(round(255 * c)) for c in reversed(track_rgb(int(i.split('/')[1]))))
                for i in ents if i.startswith('person/')}
     assert colours, 'no skeleton in the last scene'
     for bgr in colours:

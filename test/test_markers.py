@@ -18,9 +18,10 @@ import math
 
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, Track, TrackState
-from mv3dpose_ros.ros.markers import (MarkerOptions, track_color, tracks_to_markers,
+from mv3dpose_ros.ros.markers import (MarkerOptions, tracks_to_markers,
                                       tracks_to_markers_cdr)
 from mv3dpose_ros.ros.messages import message_to_dict
+from mv3dpose_ros.viz.palette import track_rgb
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -136,8 +137,8 @@ def test_deleted_tracks_not_drawn_and_coasting_dimmed():
 
 
 def test_colours_stable_and_distinct():
-    assert track_color(42) == track_color(42)
-    cols = np.array([track_color(i) for i in range(1, 9)])
+    assert track_rgb(42) == track_rgb(42)
+    cols = np.array([track_rgb(i) for i in range(1, 9)])
     dist = np.linalg.norm(cols[:, None] - cols[None], axis=-1)
     assert dist[~np.eye(8, dtype=bool)].min() > 0.05
     a1 = tracks_to_markers([make_track(9)], LAYOUT.bones, header())

@@ -32,12 +32,9 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
 from mv3dpose_ros.core.types import JointState, TrackState
+from mv3dpose_ros.viz.palette import track_colour
 import numpy as np
 
-# Distinct colours (BGR), Tableau-10 order with navy for its grey (visible on grey images);
-# a track keeps its colour for its whole life.
-PALETTE = [(180, 119, 31), (14, 127, 255), (44, 160, 44), (40, 39, 214), (189, 103, 148),
-           (75, 86, 140), (194, 119, 227), (110, 30, 20), (34, 189, 188), (207, 190, 23)]
 BACKGROUND = (250, 250, 250)
 GRID = (225, 225, 225)
 AXIS_TEXT = (110, 110, 110)
@@ -47,11 +44,6 @@ PANEL = 600           # [px] size of the top and side views
 
 class RenderError(ValueError):
     """Input that cannot be rendered; the text names the file and the reason."""
-
-
-def track_colour(track_id: int) -> Tuple[int, int, int]:
-    """Return the BGR colour of a track id."""
-    return PALETTE[int(track_id) % len(PALETTE)]
 
 
 # ------------------------------------------------------------------------------------ input

@@ -73,7 +73,8 @@ import math
 import time
 from typing import Any, Deque, Dict, Iterable, List, Optional, Sequence, Tuple
 
-NS_PER_S = 1_000_000_000
+from mv3dpose_ros.core.types import NS_PER_S
+
 #: Stamp steps kept per camera for its frame period (median).
 PERIOD_WINDOW = 16
 #: Steps needed before a camera's period is trusted.

@@ -26,6 +26,9 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+# Nanoseconds per second: stamps are int64 nanoseconds everywhere (ROS time, bags, the core).
+NS_PER_S = 1_000_000_000
+
 
 class TrackState(enum.IntEnum):
     """Track life cycle; values equal the constants of mv3dpose_msgs/TrackedSkeleton."""

@@ -47,7 +47,7 @@ from mv3dpose_ros.core.fusion import Fusion, FusionConfig
 from mv3dpose_ros.core.output import LiveOutput
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout, LAYOUT_NAMES
 from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig, SyncedSet
-from mv3dpose_ros.core.types import Track, TrackState
+from mv3dpose_ros.core.types import NS_PER_S, Track, TrackState
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import (Diagnostics, ERROR, FrequencyStats, level_value,
                                           make_status, OK, RateLimitedLog, TimestampStats,
@@ -75,7 +75,6 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-NS_PER_S = 1_000_000_000
 #: Longest stretch [ns] empty steps may cover after the last set (tracks are long deleted by
 #: then; a node clock that jumped further must not produce absurd stamps).
 MAX_IDLE_SPAN_NS = 3600 * NS_PER_S

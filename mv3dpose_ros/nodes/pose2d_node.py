@@ -46,6 +46,7 @@ from typing import Any, Deque, List, Optional, Tuple, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
 from mv3dpose_ros.core.skeleton import get_layout
+from mv3dpose_ros.core.types import NS_PER_S
 from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.pose2d.estimator import CPU, DEFAULT_SCORE, ModelError, open_estimator
 from mv3dpose_ros.pose2d.estimator import PoseEstimator, resolve_providers
@@ -75,7 +76,6 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Float64
 
-NS_PER_S = 1_000_000_000
 _STAMP = {True: struct.Struct('<iI'), False: struct.Struct('>iI')}
 
 

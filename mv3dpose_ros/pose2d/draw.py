@@ -17,10 +17,8 @@
 from typing import Sequence, Tuple
 
 import cv2
+from mv3dpose_ros.viz.palette import track_colour
 import numpy as np
-
-PALETTE = ((66, 135, 245), (245, 105, 66), (60, 200, 90), (200, 60, 200), (240, 200, 40),
-           (40, 200, 220), (150, 100, 255), (255, 150, 150))
 
 
 def draw_people(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray,
@@ -34,7 +32,7 @@ def draw_people(image: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray,
     out = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
     thick = max(1, int(round(max(out.shape[:2]) / 500)))
     for i in range(keypoints.shape[0]):
-        color = PALETTE[i % len(PALETTE)]
+        color = track_colour(i)
         x0, y0, x1, y1 = (int(round(v)) for v in boxes[i])
         cv2.rectangle(out, (x0, y0), (x1, y1), color, thick)
         cv2.putText(out, f'{scores[i]:.2f}', (x0, max(0, y0 - 4)), cv2.FONT_HERSHEY_SIMPLEX,

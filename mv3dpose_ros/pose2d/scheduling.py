@@ -29,7 +29,7 @@ import math
 import statistics
 from typing import Any, Deque, List, Optional, Sequence, Tuple
 
-NS_PER_S = 1_000_000_000
+from mv3dpose_ros.core.types import NS_PER_S
 
 #: Grid rates ``inference_rate_hz`` auto chooses from: 40 / 2^k Hz (periods 25 ms x 2^k). Every
 #: window boundary of a slower rate is one of each faster rate, so the first image of a slower

@@ -30,6 +30,7 @@ import time
 from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from mv3dpose_ros.core.types import NS_PER_S
 from mv3dpose_ros.ros.qos import publisher_events, reliable_qos
 from rclpy.clock import Clock, ClockType
 
@@ -37,7 +38,6 @@ OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
 ERROR = DiagnosticStatus.ERROR
 STALE = DiagnosticStatus.STALE
-NS_PER_S = 1_000_000_000
 
 
 def _level(value: Any) -> bytes:

@@ -19,14 +19,13 @@ One array per fusion cycle, in order: a namespace-scoped ``DELETEALL`` per names
 array replaces the previous scene atomically without per-id bookkeeping), then per track a
 ``LINE_LIST`` of the bones whose two joints are both valid (a LINE_STRIP over the valid joints
 would draw bogus bones), a ``SPHERE_LIST`` of the valid joints and a ``TEXT_VIEW_FACING`` label.
-Colours are a stable function of the track id; COASTING tracks are dimmed and PREDICTED joints
-half transparent. RViz rejects a whole marker with any NaN/inf, so only finite values are
+Colours are the track's in :mod:`mv3dpose_ros.viz.palette`; COASTING tracks are dimmed and
+PREDICTED joints half transparent. RViz rejects a whole marker with any NaN/inf, so only finite values are
 emitted, and markers without points are left out. A short ``lifetime`` clears the scene if the
 node stalls. ``tracks_to_markers_cdr`` serialises the same array straight to CDR bytes for a
 publisher (no object per point).
 """
 
-import colorsys
 from dataclasses import dataclass
 import math
 import struct
@@ -36,11 +35,10 @@ from builtin_interfaces.msg import Duration
 from geometry_msgs.msg import Point, Vector3
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.ros.messages import CdrWriter
+from mv3dpose_ros.viz.palette import track_rgb
 import numpy as np
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
-
-GOLDEN = 0.618033988749895
 
 
 @dataclass
@@ -56,12 +54,6 @@ class MarkerOptions:
     predicted_alpha: float = 0.5     # alpha factor of PREDICTED joints
     show_labels: bool = True
     show_velocity: bool = False      # <ns>/velocity ARROW from root to root + v * 0.5 s
-
-
-def track_color(track_id: int) -> Tuple[float, float, float]:
-    """Return a stable, well-spread RGB colour for a track id (golden-ratio hue walk)."""
-    hue = (int(track_id) * GOLDEN) % 1.0
-    return colorsys.hsv_to_rgb(hue, 0.75, 0.95)
 
 
 def _duration(seconds: float) -> Duration:
@@ -123,7 +115,7 @@ def _specs(tracks: Iterable[Track], bones: Sequence[Tuple[int, int]],
         if track.state == TrackState.DELETED:
             continue
         mid = int(track.track_id) % 2 ** 31
-        r, g, b = track_color(track.track_id)
+        r, g, b = track_rgb(track.track_id)
         alpha = opt.coasting_alpha if track.state == TrackState.COASTING else 1.0
         if track.state == TrackState.TENTATIVE:
             alpha *= 0.6

@@ -20,7 +20,7 @@ Building (``foxglove.messages``; no rclpy):
 - ``skeleton_update``: one ``SceneEntity`` ``person/<track_id>`` per live track, replacing the
   previous one (same id, same topic): a LINE_LIST of the bones whose two joints are valid
   (``indices`` into the joint points), one sphere per valid joint, a billboard label
-  ``#<id> <state>`` above the head, coloured by track id (``markers.track_color``, the RViz
+  ``#<id> <state>`` above the head, coloured by track id (``viz.palette``, the RViz
   colours), COASTING tracks faded; ``lifetime`` is a safety net for a stalled source.
   A DELETED track becomes a ``SceneEntityDeletion`` of its id.
 - ``camera_update``: one entity ``camera/<name>`` per camera, its frustum (centre to the four
@@ -40,11 +40,11 @@ from foxglove.messages import (Color, Duration, KeyValuePair, LinePrimitive,
                                SpherePrimitive, TextPrimitive, Timestamp, Vector3)
 from mv3dpose_ros.commands.render import View
 from mv3dpose_ros.core.camera import Camera
-from mv3dpose_ros.core.types import Track, TrackState
-from mv3dpose_ros.ros.markers import track_color, valid_joints
+from mv3dpose_ros.core.types import NS_PER_S, Track, TrackState
+from mv3dpose_ros.ros.markers import valid_joints
+from mv3dpose_ros.viz.palette import track_rgb
 import numpy as np
 
-NS_PER_S = 1_000_000_000
 _IDENTITY = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
 
 
@@ -80,7 +80,7 @@ def skeleton_entity(track: Track, bones: Sequence[Tuple[int, int]], frame_id: st
     pairs = np.asarray(bones, dtype=np.int64).reshape(-1, 2)
     pairs = pairs[ok[pairs[:, 0]] & ok[pairs[:, 1]]]
     alpha = 0.35 if track.state == TrackState.COASTING else 1.0
-    color = _color(track_color(track.track_id), alpha)
+    color = _color(track_rgb(track.track_id), alpha)
     state = TrackState(track.state).name.lower()
     head = xyz[ok][np.argmax(xyz[ok][:, 2])]
     size = Vector3(x=joint_diameter_m, y=joint_diameter_m, z=joint_diameter_m)
