@@ -21,9 +21,9 @@ array replaces the previous scene atomically without per-id bookkeeping), then p
 would draw bogus bones), a ``SPHERE_LIST`` of the valid joints and a ``TEXT_VIEW_FACING`` label.
 Colours are the track's in :mod:`mv3dpose_ros.viz.palette`; COASTING tracks are dimmed and
 PREDICTED joints half transparent. RViz rejects a whole marker with any NaN/inf, so only finite
-values are emitted, and markers without points are left out. A short ``lifetime`` clears the scene if the
-node stalls. ``tracks_to_markers_cdr`` serialises the same array straight to CDR bytes for a
-publisher (no object per point).
+values are emitted, and markers without points are left out. A short ``lifetime`` clears the
+scene if the node stalls. ``tracks_to_markers_cdr`` serialises the same array straight to CDR
+bytes for a publisher (no object per point).
 """
 
 from dataclasses import dataclass
