@@ -117,6 +117,8 @@ class FoxgloveClient:
         self.url = url
         self.server_info: Dict[str, Any] = {}
         self.channels: Dict[int, Dict[str, Any]] = {}       # id -> advertised channel
+        self.advertisements: List[List[str]] = []            # the topics of each advertise
+        self.statuses: List[Dict[str, Any]] = []             # the server's status messages
         self._subscriptions: Dict[int, int] = {}            # subscription id -> channel id
         self._decoders: Dict[int, Callable[[bytes], Any]] = {}
         self._ws = None
@@ -140,6 +142,9 @@ class FoxgloveClient:
         elif op == 'advertise':
             for ch in msg['channels']:
                 self.channels[int(ch['id'])] = ch
+            self.advertisements.append([ch['topic'] for ch in msg['channels']])
+        elif op == 'status':
+            self.statuses.append(msg)
         elif op == 'unadvertise':
             for cid in msg['channelIds']:
                 self.channels.pop(int(cid), None)
@@ -226,6 +231,53 @@ def record(url: str, topics: Optional[Sequence[str]], seconds: float,
                 out[m.topic].append(m)
             return out
     return asyncio.run(run())
+
+
+@dataclass
+class StartupWatch:
+    """What one client saw of a server it was waiting for (``watch_startup``)."""
+
+    advertisements: List[List[str]]      # the topics of each ``advertise``, in order
+    subscribed: List[str]                # every topic subscribed, at its advertisement
+    received: Dict[str, int]             # messages per subscribed topic
+    errors: List[str]                    # the server's warning/error status messages
+
+
+async def watch_startup(url: str, seconds: float, connect_timeout: float = 60.0
+                        ) -> StartupWatch:
+    """
+    Connect the moment ``url`` accepts and subscribe to each channel as it is advertised.
+
+    This is what the Foxglove app does when it reconnects to a restarting server: a
+    subscription that reaches the server between a channel's advertisement and its
+    registration is refused ("Unknown channel ID", a status message) and silently lost.
+    """
+    deadline = time.monotonic() + connect_timeout
+    while True:
+        client = FoxgloveClient(url)
+        try:
+            await client.__aenter__()
+            break
+        except Exception as exc:  # noqa: B902 - refused, reset, or a handshake cut short
+            if time.monotonic() > deadline:
+                raise ProtocolError(f'{url}: no server within {connect_timeout} s: {exc}')
+            await asyncio.sleep(0.01)
+    subscribed: List[str] = []
+    received: Dict[str, int] = {}
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            new = [t for t in sorted(client.topics()) if t not in received]
+            if new:
+                await client.subscribe(new)
+                subscribed += new
+                received.update(dict.fromkeys(new, 0))
+            for m in await client.receive(0.02):
+                received[m.topic] += 1
+    finally:
+        await client.__aexit__()
+    errors = [str(m.get('message')) for m in client.statuses if int(m.get('level', 0)) >= 1]
+    return StartupWatch(client.advertisements, subscribed, received, errors)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -134,10 +134,10 @@ class FoxgloveView(Node):
             self.cameras = {c: rig[c] for c in ids}
             self.world_frame = v('world_frame') or rig_metadata(v('rig_config'))[0] or 'map'
 
+        # Every channel exists before the server accepts a client: a client already waiting
+        # (Foxglove reconnecting after a restart) gets them all in its first advertisement,
+        # never a channel it may subscribe to before the server has registered it.
         self.fg_context = foxglove.Context()
-        self.server = foxglove.start_server(name='mv3dpose', host=v('host'), port=v('port'),
-                                            context=self.fg_context)
-        self.port = self.server.port
         self.scene = SceneUpdateChannel(SCENE_TOPIC, context=self.fg_context)
         self.camera_scene = SceneUpdateChannel(CAMERAS_TOPIC, context=self.fg_context)
         tracks_topic = self.resolve_topic_name(v('tracks_topic'))
@@ -166,6 +166,9 @@ class FoxgloveView(Node):
                 self.image_channels[cam] = CompressedImageChannel(out, context=self.fg_context)
                 self._images[cam] = deque(maxlen=IMAGES_KEPT)
                 self._image_topics[cam] = topic
+        self.server = foxglove.start_server(name='mv3dpose', host=v('host'), port=v('port'),
+                                            context=self.fg_context)
+        self.port = self.server.port
         self._send_cameras()
         self._timer = self.create_timer(float(v('cameras_period_s')), self._send_cameras)
         if self.image_channels:
