@@ -1,0 +1,99 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Each camera's stamp offset against the rest of the rig, from when its messages arrive.
+
+Sets are matched on capture stamps, and in a multi-host rig every host stamps with its own
+clock: a camera host whose clock is off by a fraction of a frame period puts views of different
+instants into one set, and nothing else would tell. What the fusion host can see is the delay
+of each message, arrival (its own clock) minus stamp (the camera host's): the capture, transport
+and inference pipeline plus the clock offset. Pipelines of one rig differ little in their
+fastest messages, so a camera's low delay quantile standing apart from the other cameras' is
+its clock offset (positive: its stamps are later than the rig's, i.e. its clock runs ahead).
+
+It cannot tell a clock offset from a pipeline that is that much faster or slower (a camera
+host with a slower CPU reads as stamped early), so the warning says both and what to check.
+With two cameras the offset is relative to the other one: either may be the one that is off.
+"""
+
+from collections import deque
+from typing import Deque, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from mv3dpose_ros.core.types import NS_PER_S
+
+
+class StampOffsets:
+    """Per-camera stamp offsets from arrival delays over a sliding window."""
+
+    def __init__(self, window_s: float = 10.0, min_samples: int = 20,
+                 quantile: float = 0.1) -> None:
+        self.window_ns = int(window_s * NS_PER_S)
+        self.min_samples = int(min_samples)
+        self.quantile = float(quantile)
+        self._delays: Dict[str, Deque[Tuple[int, int]]] = {}     # camera -> (arrival, delay)
+
+    def observe(self, camera: str, stamp_ns: int, arrival_ns: int) -> None:
+        """Record one message: ``arrival_ns`` on the fusion host's clock, as the stamps'."""
+        q = self._delays.setdefault(camera, deque())
+        q.append((arrival_ns, arrival_ns - stamp_ns))
+        while q and q[0][0] < arrival_ns - self.window_ns:
+            q.popleft()
+
+    def reset(self) -> None:
+        """Forget every delay (a clock jump: the old delays say nothing of the new clock)."""
+        self._delays.clear()
+
+    def _low_delay_s(self, camera: str) -> Optional[float]:
+        q = self._delays.get(camera)
+        if not q or len(q) < self.min_samples:
+            return None
+        return float(np.quantile([d for _, d in q], self.quantile)) / NS_PER_S
+
+    def offsets_s(self) -> Dict[str, float]:
+        """Return each camera's offset [s] against the median of the other cameras'."""
+        low = {c: d for c in self._delays if (d := self._low_delay_s(c)) is not None}
+        out: Dict[str, float] = {}
+        for cam, delay in low.items():
+            others = [d for c, d in low.items() if c != cam]
+            if others:
+                out[cam] = float(np.median(others)) - delay
+        return out
+
+    def suspects(self, period_s: float, fraction: float, floor_s: float
+                 ) -> List[Tuple[str, float]]:
+        """Return ``(camera, offset_s)`` beyond ``max(fraction x period, floor)``, worst first."""
+        offsets = self.offsets_s()
+        limit = max(fraction * period_s, floor_s)
+        found = [(c, o) for c, o in offsets.items() if abs(o) > limit]
+        if found and len(offsets) > 2:
+            # with three or more cameras the odd one out is the one that is off; a camera the
+            # others all agree with is not named because of it
+            found = [(c, o) for c, o in found if abs(o) >= 0.5 * max(abs(x) for _, x in found)]
+        return sorted(found, key=lambda co: -abs(co[1]))
+
+
+def describe_offset(camera: str, offset_s: float, period_s: float,
+                    publisher: str = '') -> str:
+    """Say what an offset means and what to fix, naming the camera and its publisher."""
+    where = f' (published by {publisher})' if publisher else ''
+    direction = 'later' if offset_s > 0 else 'earlier'
+    return (f'camera {camera}{where}: stamps {abs(offset_s) * 1e3:.1f} ms {direction} than the '
+            f'rest of the rig ({abs(offset_s) / period_s:.0%} of its {period_s * 1e3:.0f} ms '
+            f'frame period), from arrival delays: views of different instants are fused as '
+            f'one set. Check that host\'s clock (chrony: `chronyc tracking`; PTP: linuxptp) '
+            f'or the driver\'s stamping; a pipeline that much '
+            f'{"faster" if offset_s > 0 else "slower"} than the others reads the same.')
