@@ -130,6 +130,8 @@ PARAMETERS = {
     'preload': (False, 'decode every frame before starting (steady timing)'),
     'hold_s': (0.0, 'looping grid mode: show each image of the source this long [s] (a still '
                     'scene per image, e.g. for tracking on a few photos); 0 = one per instant'),
+    'stamp_offset_s': (0.0, 'added to every stamp [s]: a camera host whose clock is off, for '
+                            'testing what fusion_node reports'),
 }
 
 
@@ -360,6 +362,7 @@ class ImagePublisher(Node):
         self.slot_ns = max(self.period_ns, int(round(float(p['hold_s']) * 1e9)))
         self.start_ns = int(round(float(p['start_stamp']) * 1e9)) or None
         self.stamp_now = self.start_ns is None
+        self.stamp_offset_ns = int(round(float(p['stamp_offset_s']) * 1e9))
         self.count = self.skipped = 0
         self.done = threading.Event()
         self._wire: Dict[int, bytes] = {}      # frame index -> serialised message (loop)
@@ -463,8 +466,8 @@ class ImagePublisher(Node):
             if nxt is None:
                 break
             try:
-                self._publish(*nxt, due if grid else (now if self.stamp_now else
-                                                      self.stamp_ns(self.count)))
+                self._publish(*nxt, self.stamp_offset_ns + (
+                    due if grid else (now if self.stamp_now else self.stamp_ns(self.count))))
             except Exception:  # noqa: B902 - rclpy raises RCLError, a pybind11 type
                 if self.context.ok():
                     raise
@@ -557,6 +560,8 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
     parser.add_argument('--count', type=int, dest='max_frames', help='stop after N frames')
     parser.add_argument('--wait-for-subscribers', type=int, dest='wait_for_subscribers')
     parser.add_argument('--preload', action='store_true', default=None)
+    parser.add_argument('--stamp-offset', type=float, dest='stamp_offset_s',
+                        help='add this to every stamp [s] (testing a host clock that is off)')
     parser.add_argument('--hold', type=float, dest='hold_s',
                         help='with --loop / --bounce on the grid: show each image this long '
                         '[s]')
