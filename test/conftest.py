@@ -12,13 +12,15 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Shared test fixtures: the real data beside the project and isolated rclpy contexts."""
+"""
+Shared test fixtures: the real data beside the project and isolated rclpy contexts.
+
+The harness (node processes, probes, ``spin_until``, percentiles) is
+``mv3dpose_ros.testing``, shared with the benchmarks.
+"""
 
 import os
 import random
-import signal
-import subprocess
-import time
 
 import pytest
 
@@ -56,23 +58,3 @@ def ros_context():
     rclpy.init(context=ctx)
     yield ctx
     rclpy.shutdown(context=ctx)
-
-
-def spin_until(executor, predicate, timeout: float = 10.0) -> bool:
-    """Spin ``executor`` until ``predicate()`` holds or ``timeout`` seconds pass."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        executor.spin_once(timeout_sec=0.05)
-    return bool(predicate())
-
-
-def interrupt(proc: subprocess.Popen, timeout: float) -> int:
-    """Stop ``proc`` as Ctrl-C would; kill it if it has not exited after ``timeout`` s."""
-    proc.send_signal(signal.SIGINT)
-    try:
-        return proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        return proc.wait()

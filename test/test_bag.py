@@ -20,13 +20,13 @@ import subprocess
 import sys
 import time
 
-from conftest import spin_until
 from fuzz_corpus import mcap_chunks
 from mv3dpose_ros.commands.bag import info, qos_from_rclpy, qos_to_rclpy
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, check_bag, get_typestore
 from mv3dpose_ros.io.bag import make_qos
 from mv3dpose_ros.nodes.roundtrip_probe import sample_message
 from mv3dpose_ros.ros.messages import message_to_dict
+from mv3dpose_ros.testing.spin import spin_until
 import pytest
 from rosbags.interfaces import QosDurability, QosReliability
 

@@ -27,17 +27,16 @@ import sys
 import threading
 import time
 
-from conftest import interrupt
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.camera import Camera
 from mv3dpose_ros.ros.images import numpy_to_image
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.qos import reliable_qos
+from mv3dpose_ros.testing.probe import Probe
+from mv3dpose_ros.testing.processes import NodeProcess
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 import yaml
@@ -193,31 +192,21 @@ def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
     from test_pose2d_node import _crafted_model
     model, _ = _crafted_model(tmp_path)
     log_path = tmp_path / 'bringup.log'
-    log = open(log_path, 'w')
-    proc = subprocess.Popen(
+    proc = NodeProcess(
         [sys.executable, '-m', 'mv3dpose_ros.nodes.bringup', '--rig', rig,
          '--pose2d-param', f'model.path:={model}', '--pose2d-param', 'model.threads:=1',
          '--pose2d-param', 'image_qos.reliability:=reliable', '--stop-timeout', '10'],
-        stdout=log, stderr=subprocess.STDOUT, cwd=ROOT)
-    node = rclpy.create_node('bringup_probe', context=ros_context)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(node)
-    persons = {c: [] for c in CAMS}
-    tracks = []
-    for c in CAMS:
-        node.create_subscription(Person2DArray, f'/{c}/persons_2d', persons[c].append,
-                                 reliable_qos())
-    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', tracks.append,
-                             reliable_qos())
+        log_path, cwd=ROOT, new_session=False)
+    probe = Probe('bringup_probe', context=ros_context)
+    node = probe.node
+    persons = {c: probe.subscribe(Person2DArray, f'/{c}/persons_2d', reliable_qos())
+               for c in CAMS}
+    tracks = probe.subscribe(TrackedSkeletonArray, '/fusion_node/tracks', reliable_qos())
     # the default --image-topic, where mv3dpose_image_publisher --camera publishes
-    pubs = {c: node.create_publisher(Image, f'/{c}/image_raw', reliable_qos(5)) for c in CAMS}
+    pubs = probe.camera_publishers(Image, CAMS, '/{camera}/image_raw', reliable_qos(5))
 
     def spin_until(pred, timeout):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not pred():
-            ex.spin_once(timeout_sec=0.05)
-            assert proc.poll() is None, log_path.read_text()
-        return pred()
+        return probe.spin_until(pred, timeout, processes=[proc], step=0.05)
 
     try:
         ready = spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()) and
@@ -241,10 +230,8 @@ def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
         assert all(m.camera_id == c for c in CAMS for m in persons[c])
         assert tracks[-1].header.frame_id == 'world'          # the rig YAML's world_frame
     finally:
-        code = interrupt(proc, 40)
-        log.close()
-        ex.shutdown()
-        node.destroy_node()
+        code = proc.interrupt(40)
+        probe.close()
     text = log_path.read_text()
     assert code == 0, text
     assert 'all nodes stopped cleanly' in text

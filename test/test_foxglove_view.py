@@ -32,7 +32,6 @@ import subprocess
 import threading
 import time
 
-from conftest import interrupt
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from google.protobuf.timestamp_pb2 import Timestamp
@@ -44,6 +43,7 @@ from mv3dpose_ros.io.foxglove_ws import FoxgloveClient
 from mv3dpose_ros.ros.messages import person2d_array_to_numpy, stamp_to_ns, tracks_to_msg
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.ros.scene import frustum_points, latest_entities, render_scene
+from mv3dpose_ros.testing.processes import interrupt
 from mv3dpose_ros.viz.palette import track_rgb
 import numpy as np
 import pytest

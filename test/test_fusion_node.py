@@ -27,7 +27,6 @@ import subprocess
 import sys
 import time
 
-from conftest import interrupt
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
@@ -40,6 +39,9 @@ from mv3dpose_ros.ros.messages import (msg_to_tracks, ns_to_stamp, numpy_to_pers
                                        person2d_array_to_numpy, stamp_to_ns)
 from mv3dpose_ros.ros.qos import latched_qos, reliable_qos, sensor_qos
 from mv3dpose_ros.sim import make_scene
+from mv3dpose_ros.testing.probe import diagnostics_text, Probe
+from mv3dpose_ros.testing.processes import NodeProcess
+from mv3dpose_ros.testing.spin import spin_for, spin_until
 import numpy as np
 import pytest
 import rclpy
@@ -122,17 +124,10 @@ class Harness:
                                            self.pubs.values())), 'fusion_node never matched'
 
     def spin_until(self, predicate, timeout=10.0):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            self.executor.spin_once(timeout_sec=0.02)
-        return bool(predicate())
+        return spin_until(self.executor, predicate, timeout)
 
     def spin_for(self, seconds):
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.01)
+        spin_for(self.executor, seconds)
 
     def publish(self, cam, msg, spin=2):
         self.pubs[cam].publish(msg)
@@ -410,40 +405,19 @@ def test_fusion_node_process_matches_fusion_step(scene, rig_path, tmp_path):
     cmd = ['fusion_node', '--ros-args',
            '--params-file', os.path.join(ROOT, 'config', 'fusion.yaml'),
            '--params-file', str(overrides)]
-    log = open(tmp_path / 'fusion_node.log', 'w')
-    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node('feeder', context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    received, diags = [], []
-    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', received.append,
-                             reliable_qos(100))
-    node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, reliable_qos(50))
-    pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(100))
-            for c in scene.cameras}
-
-    def last_diagnostics():
-        last = {}
-        for arr in diags:
-            for st in arr.status:
-                last[st.name] = st.message + ' ' + ', '.join(f'{kv.key}={kv.value}'
-                                                             for kv in st.values)
-        return '\n'.join(f'{k}: {v}' for k, v in sorted(last.items()))
+    proc = NodeProcess(cmd, tmp_path / 'fusion_node.log')
+    probe = Probe('feeder')
+    received = probe.subscribe(TrackedSkeletonArray, '/fusion_node/tracks')
+    diags = probe.subscribe(DiagnosticArray, '/diagnostics', reliable_qos(50))
+    pubs = probe.camera_publishers(Person2DArray, scene.cameras)
 
     def spin_until(pred, timeout):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not pred():
-            executor.spin_once(timeout_sec=0.02)
-            assert proc.poll() is None, open(tmp_path / 'fusion_node.log').read()
-        return pred()
+        return probe.spin_until(pred, timeout, processes=[proc])
 
     try:
         assert spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()) and
-                          node.count_publishers('/fusion_node/tracks') > 0, 30.0), \
-            open(tmp_path / 'fusion_node.log').read()
+                          probe.node.count_publishers('/fusion_node/tracks') > 0, 30.0), \
+            proc.log()
         frames = 45
         t0 = base_ns(frames)
         rng = random.Random(2)
@@ -458,14 +432,11 @@ def test_fusion_node_process_matches_fusion_step(scene, rig_path, tmp_path):
             sent.append((stamp, msgs))
             # Lock step: the complete set is emitted as soon as the last camera arrived.
             assert spin_until(lambda: len(received) > f, 10.0), \
-                f'no output for frame {f}:\n{last_diagnostics()}'
+                f'no output for frame {f}:\n{diagnostics_text(diags)}'
     finally:
-        code = interrupt(proc, 10)
-        log.close()
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
-    assert code == 0, open(tmp_path / 'fusion_node.log').read()
+        code = proc.interrupt(10)
+        probe.close()
+    assert code == 0, proc.log()
 
     # The node's fusion.* values are those of config/fusion.yaml.
     with open(os.path.join(ROOT, 'config', 'fusion.yaml')) as f:

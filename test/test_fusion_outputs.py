@@ -23,19 +23,16 @@ PoseArray) and tracking must start again with new ids.
 
 import math
 import os
-import subprocess
-import time
 
-from conftest import interrupt
 from geometry_msgs.msg import PoseArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.ros.frames import yaw_from_quaternion
 from mv3dpose_ros.ros.messages import stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
+from mv3dpose_ros.testing.probe import Probe
+from mv3dpose_ros.testing.processes import NodeProcess
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from real_feed import Pose2Sim
 from std_srvs.srv import Trigger
 import yaml
@@ -53,29 +50,17 @@ def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path,
         # 60 fps: frames 16.7 ms apart; a loaded host may deliver one camera 1 s late
         'sync': {'slop_s': 0.008, 'max_wait_s': 2.0}}}}))
     log_path = tmp_path / 'fusion_node.log'
-    log = open(log_path, 'w')
-    proc = subprocess.Popen(['fusion_node', '--ros-args', '--params-file',
-                             os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file',
-                             str(params)], stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True)
-    ctx = ros_context
-    node = rclpy.create_node('outputs_probe', context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    tracks, poses = [], []
-    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', tracks.append,
-                             reliable_qos(200))
-    node.create_subscription(PoseArray, '/fusion_node/poses', poses.append, reliable_qos(200))
-    pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(100))
-            for c in feed.cameras}
-    reset = node.create_client(Trigger, '/fusion_node/reset')
+    proc = NodeProcess(['fusion_node', '--ros-args', '--params-file',
+                        os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file',
+                        str(params)], log_path)
+    probe = Probe('outputs_probe', context=ros_context)
+    tracks = probe.subscribe(TrackedSkeletonArray, '/fusion_node/tracks', reliable_qos(200))
+    poses = probe.subscribe(PoseArray, '/fusion_node/poses', reliable_qos(200))
+    pubs = probe.camera_publishers(Person2DArray, feed.cameras)
+    reset = probe.node.create_client(Trigger, '/fusion_node/reset')
 
     def spin_until(pred, timeout):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not pred():
-            executor.spin_once(timeout_sec=0.02)
-            assert proc.poll() is None, log_path.read_text()
-        return pred()
+        return probe.spin_until(pred, timeout, processes=[proc])
 
     def play(frames):
         for i in frames:
@@ -87,7 +72,7 @@ def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path,
 
     try:
         assert spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()) and
-                          node.count_publishers('/fusion_node/poses') > 0 and
+                          probe.node.count_publishers('/fusion_node/poses') > 0 and
                           reset.service_is_ready(), 30.0), log_path.read_text()
         play(range(30))
         before = len(tracks)
@@ -99,10 +84,8 @@ def test_pose_array_in_sync_with_tracks_and_reset_service(shared_data, tmp_path,
         after_reset = len(tracks)
         play(range(30, 60))
     finally:
-        code = interrupt(proc, 10)
-        log.close()
-        executor.shutdown()
-        node.destroy_node()
+        code = proc.interrupt(10)
+        probe.close()
     assert code == 0, log_path.read_text()
 
     # ~/poses pairs with ~/tracks message for message: same header, roots in the same order.

@@ -161,7 +161,8 @@ def _run_publisher(args, topic, msg_type, count, ros_context, timeout=90.0):
     import sys
     import time
 
-    from conftest import interrupt, spin_until
+    from mv3dpose_ros.testing.processes import interrupt
+    from mv3dpose_ros.testing.spin import spin_until
     from mv3dpose_ros.ros.qos import sensor_qos
     import rclpy
     from rclpy.executors import SingleThreadedExecutor

@@ -27,7 +27,6 @@ import sys
 import threading
 import time
 
-from conftest import spin_until
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
@@ -37,6 +36,7 @@ from mv3dpose_ros.pose2d.ops import Letterbox
 from mv3dpose_ros.ros.images import numpy_to_image
 from mv3dpose_ros.ros.messages import ns_to_stamp, stamp_to_ns
 from mv3dpose_ros.ros.qos import latched_qos, reliable_qos
+from mv3dpose_ros.testing.spin import spin_until
 import numpy as np
 from onnx_min import make_constant_model
 import pytest

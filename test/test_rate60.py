@@ -22,19 +22,17 @@ as track sets.
 """
 
 import os
-import subprocess
 import time
 
-from conftest import interrupt
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim import make_scene
+from mv3dpose_ros.testing.probe import all_matched, diagnostics_text, Probe
+from mv3dpose_ros.testing.processes import NodeProcess
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
@@ -50,29 +48,19 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path, ros_cont
     scene = make_scene(num_cameras=4, num_people=3, num_frames=frames, fps=FPS, seed=5)
     rig = str(tmp_path / 'rig.yaml')
     save_rig_yaml(scene.cameras, rig)
-    log = open(tmp_path / 'fusion_node.log', 'w')
-    proc = subprocess.Popen(['fusion_node', '--ros-args', '--params-file',
-                             os.path.join(ROOT, 'config', 'fusion.yaml'),
-                             '-p', f'rig_config:={rig}'],
-                            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    ctx = ros_context
-    node = rclpy.create_node('player', context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    received, diags = [], []
-    node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, reliable_qos(50))
-    node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks',
-                             lambda m: received.append(m), reliable_qos(1000), raw=True)
-    pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(100))
-            for c in scene.cameras}
+    proc = NodeProcess(['fusion_node', '--ros-args', '--params-file',
+                        os.path.join(ROOT, 'config', 'fusion.yaml'), '-p', f'rig_config:={rig}'],
+                       tmp_path / 'fusion_node.log')
+    probe = Probe('player', context=ros_context)
+    executor = probe.executor
+    diags = probe.subscribe(DiagnosticArray, '/diagnostics', reliable_qos(50))
+    received = probe.subscribe(TrackedSkeletonArray, '/fusion_node/tracks', reliable_qos(1000),
+                               raw=True)
+    pubs = probe.camera_publishers(Person2DArray, scene.cameras)
     cams = list(scene.cameras)
     try:
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and not (
-                all(p.get_subscription_count() for p in pubs.values()) and
-                node.count_publishers('/fusion_node/tracks')):
-            executor.spin_once(timeout_sec=0.05)
-            assert proc.poll() is None, open(tmp_path / 'fusion_node.log').read()
+        probe.spin_until(lambda: all_matched(pubs.values()) and
+                         probe.node.count_publishers('/fusion_node/tracks'), 30, [proc], 0.05)
         time.sleep(1.0)               # let discovery settle both ways
         # The "bag": every message serialised beforehand, stamped on the wall clock it will
         # be played at.
@@ -93,19 +81,12 @@ def test_sixty_fps_unpaced_default_parameters_emit_98_percent(tmp_path, ros_cont
         while time.monotonic() < end and len(received) < frames:
             executor.spin_once(timeout_sec=0.05)
     finally:
-        code = interrupt(proc, 10)
-        log.close()
-        executor.shutdown()
-        node.destroy_node()
-    text = open(tmp_path / 'fusion_node.log').read()
+        code = proc.interrupt(10)
+        probe.close()
+    text = proc.log()
     print(f'{len(received)} track sets for {frames} published time points '
           f'({100 * len(received) / frames:.1f} %)')
     assert code == 0, text
     warnings = '\n'.join(line for line in text.splitlines() if 'INFO' not in line)
-    last = {}
-    for arr in diags:
-        for st in arr.status:
-            values = ', '.join(f'{kv.key}={kv.value}' for kv in st.values)
-            last[st.name] = f'{st.message} {values}'
-    warnings += '\n' + '\n'.join(f'{k}: {v}' for k, v in sorted(last.items()))
+    warnings += '\n' + diagnostics_text(diags)
     assert len(received) >= 0.98 * frames, warnings[-3000:]

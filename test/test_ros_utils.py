@@ -19,13 +19,13 @@ import math
 import time
 from typing import List, Tuple
 
-from conftest import spin_until
 from mv3dpose_ros.core.sync import SyncConfig
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
                                           RateLimitedLog, TimestampStats, WARN, WindowStats)
 from mv3dpose_ros.ros.qos import (describe, latched_qos, parse_reliability, reliable_qos,
                                   sensor_qos, subscription_events)
+from mv3dpose_ros.testing.spin import spin_until
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor

@@ -39,6 +39,7 @@ from mv3dpose_ros.ros.frames import (body_yaw, camera_from_transform, camera_tra
                                      track_transforms, yaw_from_quaternion)
 from mv3dpose_ros.ros.messages import msg_to_tracks, stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
+from mv3dpose_ros.testing.spin import spin_until
 import numpy as np
 import pytest
 import rclpy
@@ -257,10 +258,7 @@ class NodeRun:
                                            for p in self.pubs.values()))
 
     def spin_until(self, predicate, timeout=10.0):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and not predicate():
-            self.executor.spin_once(timeout_sec=0.02)
-        return predicate()
+        return spin_until(self.executor, predicate, timeout)
 
     def play(self):
         for i in range(len(self.feed.frames)):
