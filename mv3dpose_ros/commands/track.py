@@ -20,10 +20,12 @@ Input: a calibration file (any format ``core.calibration`` reads) and a folder `
 one sub-folder of OpenPose JSON files per camera, named like the camera (loosely: Pose2Sim's
 ``cam01_json`` is camera ``cam_01``). Frames are matched across cameras by the number in the
 file names; frame ``n`` gets the stamp ``n / fps`` seconds (``round(n * 1e9 / fps)`` ns).
-Every frame goes through ``Fusion.step``, the very code the live ``fusion_node`` runs, and the
-live publication rules (``core.output.TrackPublisher``): ``--smooth causal`` writes exactly what
-``fusion_node`` publishes on ``~/tracks``, and ``--smooth fixed-lag --lag-frames L`` exactly
-what it publishes on ``~/tracks_smoothed`` with ``smoothed_lag_frames: L``
+Every frame goes through ``Fusion.step``, the very code the live ``fusion_node`` runs. Under
+``--smooth causal`` and ``fixed-lag`` each frame is one set of the node's own live core
+(``core.live.LiveFusion``: ``Fusion.step``, coasting, the publication rules of
+``core.output``), so ``--smooth causal`` writes exactly what ``fusion_node`` publishes on
+``~/tracks``, and ``--smooth fixed-lag --lag-frames L`` exactly what it publishes on
+``~/tracks_smoothed`` with ``smoothed_lag_frames: L``
 (``core.smoothing.FixedLagSmoother``; each frame is written with its own number and stamp,
 and the last L frames, which the node publishes once L more sets, its idle steps after the
 input stops or a reset come, are flushed at the end).
@@ -49,7 +51,7 @@ import logging
 import os
 import sys
 import time
-from typing import Iterator, List, Optional, Tuple
+from typing import Iterator, List, Tuple
 
 LOG = logging.getLogger('mv3dpose.track')
 SMOOTH_MODES = ('causal', 'fixed-lag', 'offline', 'none')
@@ -181,6 +183,20 @@ def _check_layout(seq, layout) -> None:
             return
 
 
+@contextlib.contextmanager
+def _progress(total: int, progress: bool):
+    """Yield a callable that advances a tqdm bar on stderr (a no-op without ``progress``)."""
+    if not progress:
+        yield lambda: None
+        return
+    from tqdm import tqdm
+    bar = tqdm(total=total, unit='frame', desc='tracking', file=sys.stderr)
+    try:
+        yield lambda: bar.update(1)
+    finally:
+        bar.close()
+
+
 def run_fusion(fusion, seq, fps: float, progress: bool = False
                ) -> Iterator[Tuple[int, float, list]]:
     """
@@ -188,40 +204,36 @@ def run_fusion(fusion, seq, fps: float, progress: bool = False
 
     Frame ``n`` is stamped ``n / fps`` s, exactly ``round(n * 1e9 / fps)`` ns in the tracks.
     """
-    frames = seq.frames
-    bar = None
-    if progress:
-        from tqdm import tqdm
-        bar = tqdm(total=len(frames), unit='frame', desc='tracking', file=sys.stderr)
-    try:
-        for frame in frames:
+    with _progress(len(seq.frames), progress) as tick:
+        for frame in seq.frames:
             stamp = frame / fps
             yield frame, stamp, fusion.step(seq.read(frame), stamp, round(frame * 1e9 / fps))
-            if bar is not None:
-                bar.update(1)
-    finally:
-        if bar is not None:
-            bar.close()
+            tick()
 
 
-def live_output(frames: Iterator[Tuple[int, float, list]], config, lag_frames: Optional[int],
-                root_joints) -> Iterator[Tuple[int, float, list]]:
+def run_live(live, seq, fps: float, smoothed: bool = False, progress: bool = False
+             ) -> Iterator[Tuple[int, float, list]]:
     """
-    Turn ``run_fusion`` output into what ``fusion_node`` publishes, frame for frame.
+    Yield what ``fusion_node`` publishes for ``seq``: ``(frame, stamp, tracks)``.
 
-    ``lag_frames`` None: ``~/tracks``; else ``~/tracks_smoothed`` with that lag (the frames
-    still held at the end are flushed).
+    Every frame is one set of ``live`` (``core.live.LiveFusion``, the node's own live core:
+    ``Fusion.step``, coasting, the publication policy), stamped as in ``run_fusion``.
+    ``smoothed``: its ``~/tracks_smoothed`` (the frames still held at the end flushed), else
+    its ``~/tracks``.
     """
-    from mv3dpose_ros.core.output import LiveOutput
-
-    output = LiveOutput(config.publish_coast_s, lag=lag_frames or 0, root_joints=root_joints)
-    for frame, stamp, tracks in frames:
-        published, done = output.step(tracks, stamp, frame)
-        if not lag_frames:                 # causal, or a lag of 0 (the same stream)
-            yield frame, stamp, published
-        elif done is not None:
-            yield done
-    yield from output.flush()
+    frames = {}                      # stamp [ns] -> frame number, until yielded
+    with _progress(len(seq.frames), progress) as tick:
+        for frame in seq.frames:
+            stamp_ns = round(frame * 1e9 / fps)
+            frames[stamp_ns] = frame
+            views = seq.read(frame)
+            missing = [c for c in live.camera_ids if c not in views]
+            for pub in live.step_set(views, stamp_ns, frame / fps, missing):
+                if pub.smoothed == smoothed:
+                    yield frames.pop(pub.stamp_ns), pub.stamp, pub.tracks
+            tick()
+    for pub in live.flush():
+        yield frames.pop(pub.stamp_ns), pub.stamp, pub.tracks
 
 
 def run(args) -> int:
@@ -229,8 +241,10 @@ def run(args) -> int:
     from mv3dpose_ros.core.calibration import CalibrationError
     from mv3dpose_ros.core.fusion import Fusion, FusionConfig
     from mv3dpose_ros.core.hindsight import settle_tracks
+    from mv3dpose_ros.core.live import LiveFusion
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.core.smoothing import smooth_track_sequence
+    from mv3dpose_ros.core.sync import SyncConfig
     from mv3dpose_ros.core.types import JointState, TrackState
     from mv3dpose_ros.io.tracks_jsonl import TracksWriter
     import numpy as np
@@ -250,7 +264,13 @@ def run(args) -> int:
             params['smoothing'] = 'causal'      # also under fixed-lag, as in fusion_node
         config = FusionConfig(**params)
         cameras, seq, notes = open_inputs(args)
-        fusion = Fusion(cameras, layout.name, config)
+        live = fusion = None
+        lag = args.lag_frames if args.smooth == 'fixed-lag' else 0
+        if args.smooth in ('causal', 'fixed-lag'):     # fusion_node's live core
+            live = LiveFusion(list(cameras), layout, SyncConfig(), config, lag=lag)
+            live.start(cameras)
+        else:
+            fusion = Fusion(cameras, layout.name, config)
     except (CalibrationError, ValueError, FileNotFoundError, OSError, TypeError) as e:
         print(f'mv3dpose track: {e}', file=sys.stderr)
         return 2
@@ -266,7 +286,10 @@ def run(args) -> int:
         if args.output != '-' and os.path.dirname(os.path.abspath(args.output)):
             os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
         with _output(args.output) as out, TracksWriter(out, layout.name) as writer:
-            frames = run_fusion(fusion, seq, args.fps, progress)
+            if live is not None:       # ~/tracks, or ~/tracks_smoothed with a lag
+                frames = run_live(live, seq, args.fps, lag > 0, progress)
+            else:
+                frames = run_fusion(fusion, seq, args.fps, progress)
             if args.smooth == 'offline':
                 done = list(frames)
                 settled = settle_tracks([t for _, _, t in done], [s for _, s, _ in done],
@@ -277,13 +300,6 @@ def run(args) -> int:
                 smoothed = [[t for t in f if t.state == TrackState.DELETED or t.valid.any()]
                             for f in smoothed]
                 frames = ((f, s, t) for (f, s, _), t in zip(done, smoothed))
-            elif args.smooth in ('causal', 'fixed-lag'):
-                lag = args.lag_frames if args.smooth == 'fixed-lag' else None
-                try:
-                    root = layout.root_joints
-                except ValueError:
-                    root = None
-                frames = live_output(frames, config, lag, root)
             for frame, stamp, tracks in frames:
                 writer.write(frame, tracks, stamp)
                 for t in tracks:

@@ -41,17 +41,19 @@ _ARRAY_TYPES = {str: Parameter.Type.STRING_ARRAY, float: Parameter.Type.DOUBLE_A
 _SCALARS = (bool, int, float, str)
 
 
-def descriptor(description: str, read_only: bool = False,
-               dynamic: bool = False) -> ParameterDescriptor:
+def descriptor(description: str, read_only: bool = False, dynamic: bool = False,
+               dynamic_typing: bool = False) -> ParameterDescriptor:
     """Return a descriptor; dynamic parameters are tagged '[DYNAMIC]' (ZED convention)."""
     text = f'[DYNAMIC] {description}' if dynamic else description
-    return ParameterDescriptor(description=text, read_only=read_only)
+    return ParameterDescriptor(description=text, read_only=read_only,
+                               dynamic_typing=dynamic_typing)
 
 
 def declare(node: Any, name: str, default: Any, description: str, read_only: bool = False,
-            dynamic: bool = False, element_type: type = str) -> None:
+            dynamic: bool = False, element_type: type = str,
+            dynamic_typing: bool = False) -> None:
     """Declare one parameter; an empty-list default needs ``element_type`` to type the array."""
-    desc = descriptor(description, read_only, dynamic)
+    desc = descriptor(description, read_only, dynamic, dynamic_typing)
     if isinstance(default, (list, tuple)) and len(default) == 0:
         node.declare_parameter(name, _ARRAY_TYPES[element_type], desc)
     else:
@@ -252,3 +254,47 @@ def unknown_parameter_warnings(node: Any) -> List[str]:
         out.append(f'parameter {name!r} is not a parameter of {node.get_name()} and is '
                    f'ignored{hint}')
     return out
+
+
+def config_parameters(cls: type, prefix: str = '') -> List[Dict[str, Any]]:
+    """
+    List the parameters of a node config dataclass, as ``dataclass_parameters`` does.
+
+    An empty ``prefix`` gives top-level names (``rig_config``; nested dataclass fields give
+    ``limits.max_persons``). Each row also says ``dynamic``: the field, or a dataclass field it
+    is nested in, has ``metadata={'dynamic': True}`` (may change at run time), and
+    ``dynamic_typing``: the field's ``metadata={'dynamic_typing': True}`` (takes any type).
+    """
+    rows = dataclass_parameters(cls, prefix or '_')
+    for row in rows:
+        if not prefix:
+            row['name'] = row['name'][2:]
+        owner, dynamic = cls, False
+        for name in row['path']:
+            f = {x.name: x for x in dataclasses.fields(owner)}[name]
+            dynamic = dynamic or bool(f.metadata.get('dynamic', False))
+            owner = typing.get_type_hints(owner).get(name, f.type)
+        row['dynamic'] = dynamic
+        row['dynamic_typing'] = bool(f.metadata.get('dynamic_typing', False))
+    return rows
+
+
+def declare_config(node: Any, cls: type, prefix: str = '') -> None:
+    """Declare ``config_parameters(cls, prefix)``: dynamic ones '[DYNAMIC]', others read-only."""
+    for p in config_parameters(cls, prefix):
+        declare(node, p['name'], p['default'], p['description'], read_only=not p['dynamic'],
+                dynamic=p['dynamic'], element_type=p.get('element', str),
+                dynamic_typing=p['dynamic_typing'])
+
+
+def build_config(node: Any, cls: type, prefix: str = '') -> Any:
+    """Build an instance of ``cls`` from the parameters declared by ``declare_config``."""
+    values: Dict[tuple, Any] = {}
+    for p in config_parameters(cls, prefix):
+        v = value(node, p['name'], p['default'])
+        if p['type'] is float:
+            v = float(v)
+        elif p['type'] is list:
+            v = type(p['default'])(v)
+        values[tuple(p['path'])] = v
+    return _assemble(cls, values, ())
