@@ -136,11 +136,11 @@ def test_free_running_rig_tracks_most_sets(shared_data, model, tmp_path):
         assert not rejected, (cam, rejected, report)
 
 
-def readme_block(marker: str) -> str:
-    """Return the bash block of README.md after ``<!-- MARKER ... -->`` (run as typed)."""
-    text = open(os.path.join(ROOT, 'README.md'), encoding='utf-8').read()
+def readme_block(marker: str, path: str = 'README.md') -> str:
+    """Return the bash block of ``path`` after ``<!-- MARKER ... -->`` (run as typed)."""
+    text = open(os.path.join(ROOT, path), encoding='utf-8').read()
     m = re.search(rf'<!-- {marker}[^>]*-->\n```bash\n(.*?)```', text, re.S)
-    assert m, f'README.md has no {marker} block'
+    assert m, f'{path} has no {marker} block'
     return m.group(1)
 
 
