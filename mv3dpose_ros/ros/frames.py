@@ -36,7 +36,6 @@ No rclpy here: only message classes, so the functions are testable without a nod
 """
 
 import math
-import struct
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped
@@ -44,7 +43,7 @@ from mv3dpose_ros.core.calibration import matrix_to_quaternion, quaternion_to_ma
 from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.skeleton import Layout
 from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
-from mv3dpose_ros.ros.messages import CdrWriter
+from mv3dpose_ros.ros.cdr import CdrWriter
 from mv3dpose_ros.ros.names import camera_namespace
 import numpy as np
 from std_msgs.msg import Header
@@ -52,7 +51,6 @@ from std_msgs.msg import Header
 MIN_HIP_WIDTH_M = 0.05       # horizontal hip distance below which the hips give no heading
 MIN_SPEED_MPS = 0.3          # speed above which the direction of motion gives the heading
 OPTICAL_FRAME = '{camera}_optical_frame'
-_STAMP = struct.Struct('<iI')
 
 
 def optical_frame(camera: str, template: str = OPTICAL_FRAME) -> str:
@@ -197,8 +195,7 @@ def root_poses(tracks: Sequence[Track], yaws: Sequence[Optional[float]]) -> np.n
 def pose_array_cdr(poses: np.ndarray, header: Header) -> bytes:
     """Serialise ``geometry_msgs/PoseArray`` with ``poses`` (``root_poses`` rows) to CDR."""
     w = CdrWriter()
-    w.pack(_STAMP, header.stamp.sec, header.stamp.nanosec)
-    w.strings((header.frame_id,), sequence=False)
+    w.header(header)
     w.sequence(np.ascontiguousarray(poses, dtype='<f8'), align=8)
     return w.getvalue()
 

@@ -27,11 +27,11 @@ message buffer (no copy).
 ``format`` like ``bgr8; jpeg compressed bgr8``); ``numpy_to_compressed`` writes the same.
 """
 
-import struct
-from typing import Any, Callable, Optional, Tuple, Union
+from typing import Any, Optional, Tuple, Union
 
 from builtin_interfaces.msg import Time
 import cv2
+from mv3dpose_ros.ros.cdr import CdrError, CdrReader, PLAIN_CDR
 import numpy as np
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header
@@ -56,24 +56,11 @@ class ImageError(ValueError):
     """An image message the pipeline cannot read; the text says which field and why."""
 
 
-def _align4(p: int) -> int:
-    return 4 + ((p - 4 + 3) & ~3)
-
-
-def _cdr_reader(buf: bytes, what: str) -> Tuple[memoryview, str, Callable[[int], Tuple[str, int]]]:
-    """Return the view, the struct byte order and a CDR string reader of plain-CDR ``buf``."""
-    view = memoryview(buf)
-    if len(view) < 8 or view[0] != 0 or view[1] not in (0, 1):
-        raise ImageError(f'not a plain CDR {what}')
-    end = '<' if view[1] == 1 else '>'
-
-    def string(p: int) -> Tuple[str, int]:
-        p = _align4(p)
-        (n,) = struct.unpack_from(end + 'I', view, p)
-        text = bytes(view[p + 4:p + 4 + max(0, n - 1)]).decode('utf-8')
-        return text, p + 4 + n
-
-    return view, end, string
+def _reader(buf: bytes, what: str) -> CdrReader:
+    try:
+        return CdrReader(buf, PLAIN_CDR)
+    except CdrError:
+        raise ImageError(f'not a plain CDR {what}') from None
 
 
 def parse_image_cdr(buf: bytes) -> Tuple[Image, memoryview]:
@@ -85,27 +72,21 @@ def parse_image_cdr(buf: bytes) -> Tuple[Image, memoryview]:
     1 ms per 1080p frame. Raises ``ImageError`` for anything but plain little/big-endian CDR
     (callers fall back to ``rclpy.serialization.deserialize_message``).
     """
-    view, end, string = _cdr_reader(buf, 'sensor_msgs/Image')
-    pos = 4
-    align4 = _align4
+    r = _reader(buf, 'sensor_msgs/Image')
     try:
-        sec, nanosec = struct.unpack_from(end + 'iI', view, pos)
-        frame_id, pos = string(pos + 8)
-        pos = align4(pos)
-        height, width = struct.unpack_from(end + 'II', view, pos)
-        encoding, pos = string(pos + 8)
-        is_bigendian = view[pos]
-        pos = align4(pos + 1)
-        step, size = struct.unpack_from(end + 'II', view, pos)
-    except (struct.error, IndexError, UnicodeDecodeError) as exc:
+        sec, nanosec, frame_id = r.header()
+        height, width = r.unpack('II')
+        encoding = r.string()
+        (is_bigendian,) = r.unpack('B', align=1)
+        step, size = r.unpack('II')
+    except CdrError as exc:
         raise ImageError(f'truncated or malformed sensor_msgs/Image CDR: {exc}') from None
-    pos += 8
-    if pos + size > len(view):
-        raise ImageError(f'Image CDR declares {size} data bytes, {len(view) - pos} present')
+    if size > r.remaining:
+        raise ImageError(f'Image CDR declares {size} data bytes, {r.remaining} present')
     msg = Image(header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
                 height=height, width=width, encoding=encoding, is_bigendian=is_bigendian,
                 step=step)
-    return msg, view[pos:pos + size]
+    return msg, r.take(size)
 
 
 def parse_compressed_cdr(buf: bytes) -> Tuple[CompressedImage, memoryview]:
@@ -115,23 +96,20 @@ def parse_compressed_cdr(buf: bytes) -> Tuple[CompressedImage, memoryview]:
     Returns the message with empty ``data`` plus a view of the compressed bytes; raises
     ``ImageError`` for anything but plain CDR (fall back to ``deserialize_message``).
     """
-    view, end, string = _cdr_reader(buf, 'sensor_msgs/CompressedImage')
+    r = _reader(buf, 'sensor_msgs/CompressedImage')
     try:
-        sec, nanosec = struct.unpack_from(end + 'iI', view, 4)
-        frame_id, pos = string(12)
-        fmt, pos = string(pos)
-        pos = _align4(pos)
-        (size,) = struct.unpack_from(end + 'I', view, pos)
-    except (struct.error, IndexError, UnicodeDecodeError) as exc:
+        sec, nanosec, frame_id = r.header()
+        fmt = r.string()
+        size = r.u32()
+    except CdrError as exc:
         raise ImageError(f'truncated or malformed sensor_msgs/CompressedImage CDR: '
                          f'{exc}') from None
-    pos += 4
-    if pos + size > len(view):
-        raise ImageError(f'CompressedImage CDR declares {size} data bytes, {len(view) - pos} '
+    if size > r.remaining:
+        raise ImageError(f'CompressedImage CDR declares {size} data bytes, {r.remaining} '
                          'present')
     msg = CompressedImage(header=Header(stamp=Time(sec=sec, nanosec=nanosec),
                                         frame_id=frame_id), format=fmt)
-    return msg, view[pos:pos + size]
+    return msg, r.take(size)
 
 
 def _unsupported(encoding: str) -> ImageError:

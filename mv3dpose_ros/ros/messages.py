@@ -21,7 +21,6 @@ field ever carries NaN or inf.
 """
 
 from dataclasses import dataclass
-import functools
 import math
 import struct
 from typing import Any, Iterable, List, NamedTuple, Optional, Sequence, Tuple, Union
@@ -31,6 +30,7 @@ from geometry_msgs.msg import Point, Vector3
 from mv3dpose_msgs.msg import (Joint3D, Keypoint2D, Person2D, Person2DArray, SkeletonInfo,
                                TrackedSkeleton, TrackedSkeletonArray)
 from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
+from mv3dpose_ros.ros.cdr import ANY_CDR, CdrError, CdrReader, CdrWriter, U32
 import numpy as np
 from sensor_msgs.msg import RegionOfInterest
 from std_msgs.msg import Header
@@ -98,40 +98,8 @@ class Persons2D:
     ids: List[str]
 
 
-# Encapsulations rmw_fastrtps reads (first byte 0, second the kind; even = big endian, odd =
-# little endian): CDR, PL_CDR, CDR2, D_CDR2, PL_CDR2. Its generated type support reads the body
-# of a Person2DArray the same way under each (no member of it is 8-byte aligned, and it has no
-# parameter lists or delimiters); the two option bytes are ignored. Kinds 4, 5 and >= 12 fail.
-_ENCAPSULATIONS = {0: '>', 1: '<', 2: '>', 3: '<', 6: '>', 7: '<', 8: '>', 9: '<', 10: '>',
-                   11: '<'}
-
-
 def _malformed(text: str) -> InvalidMessage:
     return InvalidMessage(f'malformed Person2DArray CDR: {text}', 'malformed')
-
-
-def _cdr_string(buf: memoryview, pos: int, u32: struct.Struct) -> Tuple[str, int]:
-    """
-    Return ``(text, end)`` of the CDR string whose length field is at or after ``pos``.
-
-    Read as rclpy reads it: Fast CDR drops one terminating NUL if there is one (none is
-    required), the C message keeps the text up to its first NUL, and Python decodes it as
-    UTF-8 with U+FFFD for invalid bytes.
-    """
-    pos += -pos % 4
-    (n,) = u32.unpack_from(buf, pos)
-    pos += 4
-    if n == 0:
-        return '', pos
-    end = pos + n
-    if end > len(buf):
-        raise _malformed(f'string of {n} bytes at offset {pos} runs past the end '
-                         f'({len(buf)} bytes)')
-    raw = bytes(buf[pos:end])
-    nul = raw.find(0)
-    if nul >= 0:
-        raw = raw[:nul]
-    return raw.decode('utf-8', 'replace'), end
 
 
 def decode_person2d_array(data: Union[bytes, bytearray, memoryview]) -> Persons2D:
@@ -150,49 +118,35 @@ def decode_person2d_array(data: Union[bytes, bytearray, memoryview]) -> Persons2
     (truncation, a persons count beyond the bytes left, a string running past the end) raises
     ``InvalidMessage`` with reason 'malformed'.
     """
-    buf = memoryview(data).cast('B')
-    size = len(buf)
-    endian = _ENCAPSULATIONS.get(buf[1]) if size >= 4 and buf[0] == 0 else None
-    if endian is None:
-        raise _malformed(f'{size} bytes with encapsulation {bytes(buf[:4]).hex() or "none"}, '
-                         'expected CDR, PL_CDR or XCDR2 (00 00..03, 00 06..0b)')
-    u32 = struct.Struct(endian + 'I')
-    person = struct.Struct(endian + 'IIIIB3xf')   # roi, score
     try:
-        sec, nanosec = struct.unpack_from(endian + 'iI', buf, 4)
-        frame_id, pos = _cdr_string(buf, 12, u32)
-        camera_id, pos = _cdr_string(buf, pos, u32)
-        pos += -pos % 4
-        width, height = struct.unpack_from(endian + 'II', buf, pos)
-        layout, pos = _cdr_string(buf, pos + 8, u32)
-        pos += -pos % 4
-        (num,) = u32.unpack_from(buf, pos)
-        pos += 4
-        if num > size - pos:
-            raise _malformed(f'{num} persons cannot fit in the remaining {size - pos} bytes')
+        r = CdrReader(data, ANY_CDR)
+        sec, nanosec, frame_id = r.header()
+        camera_id = r.string()
+        width, height = r.unpack('II')
+        layout = r.string()
+        num = r.u32()
+        if num > r.remaining:
+            raise _malformed(f'{num} persons cannot fit in the remaining {r.remaining} bytes')
         counts, starts, rois, scores, ids = [], [], [], [], []
         for _ in range(num):
-            pos += -pos % 4
-            x0, y0, h, w, rect, score = person.unpack_from(buf, pos)
+            x0, y0, h, w, rect, score = r.unpack('IIIIB3xf')      # roi, score
             rois.append((x0, y0, h, w, 1 if rect else 0))
             scores.append(score)
-            text, pos = _cdr_string(buf, pos + 24, u32)
-            ids.append(text)
-            pos += -pos % 4
-            (k,) = u32.unpack_from(buf, pos)
-            pos += 4
-            if k > size - pos:
+            ids.append(r.string())
+            k = r.u32()
+            left = r.size - r.pos
+            if k > left:
                 k = 0      # the type support's 'sequence size exceeds remaining buffer'
-            elif 12 * k > size - pos:
-                raise _malformed(f'{k} keypoints at offset {pos} cannot fit in the remaining '
-                                 f'{size - pos} bytes')
+            elif 12 * k > left:
+                raise _malformed(f'{k} keypoints at offset {r.pos} cannot fit in the remaining '
+                                 f'{r.remaining} bytes')
             counts.append(k)
-            starts.append(pos // 4)
-            pos += 12 * k
-    except struct.error as exc:
-        raise _malformed(f'truncated ({size} bytes): {exc}') from None
+            starts.append(r.pos // 4)
+            r.pos += 12 * k
+    except CdrError as exc:
+        raise _malformed(str(exc)) from None
     if num:
-        words = np.frombuffer(buf, dtype=endian + 'f4', count=size // 4)
+        words = np.frombuffer(r.buf, dtype=r.order + 'f4', count=r.size // 4)
         kps = np.concatenate([words[s:s + 3 * k] for s, k in zip(starts, counts)])
     else:
         kps = np.zeros(0, np.float32)
@@ -445,72 +399,11 @@ _NONE = int(PositionSource.NONE)
 # track_id, state, confidence, first_seen, last_observed, age, missed, position, velocity,
 # velocity_valid, position_covariance, position_source, len(joints).
 _SKELETON_HEAD = struct.Struct('<QB3xfiIiIII3d3d?7x9dB3xI')
-_STAMP = struct.Struct('<iI')
 # One Joint3D from an 8-aligned start: 40 bytes, no padding (the next one starts right after).
 _JOINT3D = np.dtype({'names': ['position', 'confidence', 'state', 'num_views',
                                'reprojection_error', 'position_variance'],
                      'formats': [('<f8', (3,)), '<f4', 'u1', 'u1', '<f4', '<f4'],
                      'offsets': [0, 24, 28, 29, 32, 36], 'itemsize': 40})
-_U32 = struct.Struct('<I')
-
-
-@functools.lru_cache(maxsize=4096)
-def _cdr_strings(texts: Tuple[str, ...], sequence: bool) -> bytes:
-    """Return CDR strings (after their count if ``sequence``) as written from a 4-aligned start."""
-    out = bytearray()
-    if sequence:
-        out += _U32.pack(len(texts))
-    for text in texts:
-        out += bytes(-len(out) % 4)
-        data = text.encode('utf-8')
-        out += _U32.pack(len(data) + 1)
-        out += data
-        out += b'\x00'
-    return bytes(out)
-
-
-class CdrWriter:
-    """
-    Little-endian plain CDR written straight from Python values and numpy arrays.
-
-    For outputs published as bytes (``Publisher.publish(bytes)``), which skips building one
-    Python message object per point or joint and rclpy's conversion of them. Alignment counts
-    from the payload start, after the 4-byte encapsulation header, as rmw_fastrtps does.
-    """
-
-    def __init__(self) -> None:
-        self.buf = bytearray(b'\x00\x01\x00\x00')    # plain CDR, little endian
-
-    def align(self, n: int) -> None:
-        """Pad to a multiple of ``n`` bytes from the payload start."""
-        self.buf += bytes(-(len(self.buf) - 4) % n)
-
-    def pack(self, fmt: struct.Struct, *values: Any, align: int = 4) -> None:
-        """Align, then write ``values`` with ``fmt`` (explicit padding inside the format)."""
-        self.buf += bytes(-(len(self.buf) - 4) % align)
-        self.buf += fmt.pack(*values)
-
-    def strings(self, texts: Tuple[str, ...], sequence: bool = True) -> None:
-        """Write strings back to back (a ``string[]`` with its count when ``sequence``)."""
-        self.buf += bytes(-(len(self.buf) - 4) % 4)
-        self.buf += _cdr_strings(tuple(texts), sequence)
-
-    def sequence(self, records: np.ndarray, align: int, tail: int = 0) -> None:
-        """
-        Write a sequence: its count, then ``records`` (a C-contiguous little-endian array).
-
-        Elements start at a multiple of ``align``; ``tail`` padding bytes of the last record
-        are dropped (a struct's trailing padding belongs to the next element only).
-        """
-        self.pack(_U32, len(records))
-        if len(records):
-            self.align(align)
-            data = memoryview(np.ascontiguousarray(records)).cast('B')
-            self.buf += data[:len(data) - tail]
-
-    def getvalue(self) -> bytes:
-        """Return the serialised message."""
-        return bytes(self.buf)
 
 
 def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes:
@@ -521,10 +414,9 @@ def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes
     0.8 ms for 6 people x 17 joints).
     """
     w = CdrWriter()
-    w.pack(_STAMP, header.stamp.sec, header.stamp.nanosec)
-    w.strings((header.frame_id, layout), sequence=False)
+    w.header(header, layout)
     tracks = list(tracks)
-    w.pack(_U32, len(tracks))
+    w.pack(U32, len(tracks))
     for track, j in zip(tracks, _all_joint_fields(tracks)):
         f = _track_fields(track)
         num = len(j.state)
@@ -539,8 +431,7 @@ def tracks_to_cdr(tracks: Iterable[Track], header: Header, layout: str) -> bytes
         joints['reprojection_error'] = j.error
         joints['position_variance'] = j.variance
         if num:                       # the joint count is the head's last field
-            w.align(8)
-            w.buf += memoryview(joints).cast('B')
+            w.raw(memoryview(joints).cast('B'), align=8)
         w.strings(f.source_cameras)
     return w.getvalue()
 
