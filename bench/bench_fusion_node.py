@@ -59,7 +59,6 @@ panoptic:4@10,panoptic:5@30 --seconds 20 [--base /tmp/old_checkout]``
 import argparse
 import os
 import struct
-import subprocess
 import sys
 import tempfile
 import time
@@ -69,14 +68,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array
-from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim.people import WalkConfig
 from mv3dpose_ros.sim.rig import RigConfig
 from mv3dpose_ros.sim.scene import make_scene
+from mv3dpose_ros.testing.probe import all_matched, Probe
+from mv3dpose_ros.testing.processes import NodeProcess
+from mv3dpose_ros.testing.stats import percentile
 import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
@@ -224,17 +223,13 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
     env = dict(os.environ)
     if node_tree:      # that checkout's package first; cwd there too (python puts '' first)
         env['PYTHONPATH'] = os.path.abspath(node_tree) + os.pathsep + env.get('PYTHONPATH', '')
-    log = open(os.path.join(tmp, 'fusion_node.log'), 'w')
-    proc = subprocess.Popen(['fusion_node', '--ros-args', '--params-file',
-                             os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file',
-                             over], stdout=log, stderr=subprocess.STDOUT, env=env,
-                            cwd=os.path.abspath(node_tree) if node_tree else None)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    node = rclpy.create_node('bench_feeder', context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    e2e, diags, outputs, marker_count = [], [], [], [0]
+    proc = NodeProcess(['fusion_node', '--ros-args', '--params-file',
+                        os.path.join(ROOT, 'config', 'fusion.yaml'), '--params-file', over],
+                       os.path.join(tmp, 'fusion_node.log'), env=env, new_session=False,
+                       cwd=os.path.abspath(node_tree) if node_tree else None)
+    probe = Probe('bench_feeder')
+    node, ex = probe.node, probe.executor
+    e2e, outputs, marker_count = [], [], [0]
 
     def on_tracks(data: bytes) -> None:       # raw: the stamp is read from the CDR bytes
         sec, nanosec = STAMP.unpack_from(data, 4)
@@ -243,7 +238,7 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
 
     node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', on_tracks,
                              reliable_qos(100), raw=True)
-    node.create_subscription(DiagnosticArray, '/diagnostics', diags.append, reliable_qos(20))
+    diags = probe.subscribe(DiagnosticArray, '/diagnostics', reliable_qos(20))
     if markers:
         def on_markers(data: bytes) -> None:
             marker_count[0] += 1
@@ -251,14 +246,8 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
         node.create_subscription(MarkerArray, '/fusion_node/markers', on_markers,
                                  reliable_qos(100), raw=True)
     try:
-        pubs = {c: node.create_publisher(Person2DArray, camera_topic('/{camera}/persons_2d', c),
-                                         reliable_qos(10)) for c in feed.cameras}
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not all(
-                p.get_subscription_count() for p in pubs.values()):
-            ex.spin_once(timeout_sec=0.05)
-            if proc.poll() is not None:
-                raise RuntimeError(open(log.name).read())
+        pubs = probe.camera_publishers(Person2DArray, feed.cameras, qos=reliable_qos(10))
+        probe.spin_until(lambda: all_matched(pubs.values()), 60, [proc], 0.05)
         # Serialise beforehand so the feeder's own cost stays small; stamps patched at send.
         msgs = [{c: bytearray(serialize_message(numpy_to_person2d_array(
                     v, Header(frame_id=c), c, feed.cameras[c].width, feed.cameras[c].height,
@@ -288,8 +277,7 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
             next_t += period
             wait_until(next_t)
         if not e2e:
-            raise RuntimeError(f'no output within {warmup} warm-up frames:\n'
-                               + open(log.name).read())
+            raise RuntimeError(f'no output within {warmup} warm-up frames:\n' + proc.log())
         e2e.clear()
         outputs.clear()
         marker_count[0] = 0
@@ -310,15 +298,8 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
                 s.name.endswith('tracking') for a in diags for s in a.status):
             ex.spin_once(timeout_sec=0.05)
     finally:
-        proc.send_signal(2)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        log.close()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
+        proc.interrupt(10)
+        probe.close()
     values = {}
     for arr in diags:
         for s in arr.status:
@@ -333,8 +314,7 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
             'node_p95_ms': values.get('latency p95 (ms)', 'n/a'),
             'proc_median_ms': values.get('processing median (ms)', 'n/a'),
             'proc_p95_ms': values.get('processing p95 (ms)', 'n/a'),
-            'e2e_median_ms': float(np.median(lat)) if len(lat) else float('nan'),
-            'e2e_p95_ms': float(np.percentile(lat, 95)) if len(lat) else float('nan'),
+            'e2e_median_ms': percentile(lat, 50), 'e2e_p95_ms': percentile(lat, 95),
             'cpu_pct': 100.0 * cpu_s / (wall1 - wall0),
             'cpu_ms_per_set': 1e3 * cpu_s / max(1, len(e2e)),
             'markers': marker_count[0],

@@ -197,7 +197,7 @@ def compare(model: str, threads: int, providers: Sequence[str] = ('auto',)) -> i
         print(f'bench_pose2d --compare: skipped: no fetched {model} or no {demo}')
         return 0
     calib = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cams)
-    # The first 4 cameras: the rig bench_pipeline.py and bench_rig.py play.
+    # The first 4 cameras: the rig bench_pipeline.py plays (in-process and --publishers).
     calib4 = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cams[:4])
     images = {(c, f): cv2.imread(os.path.join(demo, c, f'{c}_{f}.jpg')) for c in cams
               for f in frames}

@@ -33,7 +33,6 @@ Usage: ``python bench/soak.py [--seconds 600] [--cameras 4] [--people 3] [--rate
 
 import argparse
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -44,9 +43,9 @@ from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array, stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim import make_scene
-import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from mv3dpose_ros.testing.probe import all_matched, Probe
+from mv3dpose_ros.testing.processes import NodeProcess
+from mv3dpose_ros.testing.stats import percentile
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Header
 
@@ -87,15 +86,11 @@ def main() -> int:
     save_rig_yaml(scene.cameras, rig)
     cams = list(scene.cameras)
     half = cams[1]
-    log = open(os.path.join(tmp, 'fusion_node.log'), 'w')
-    proc = subprocess.Popen(['fusion_node', '--ros-args', '--params-file',
-                             os.path.join(ROOT, 'config', 'fusion.yaml'), '-p',
-                             f'rig_config:={rig}', '-p', 'use_sim_time:=true'],
-                            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    rclpy.init()
-    node = rclpy.create_node('soak_feeder')
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
+    proc = NodeProcess(['fusion_node', '--ros-args', '--params-file',
+                        os.path.join(ROOT, 'config', 'fusion.yaml'), '-p', f'rig_config:={rig}',
+                        '-p', 'use_sim_time:=true'], os.path.join(tmp, 'fusion_node.log'))
+    probe = Probe('soak_feeder')
+    node, ex = probe.node, probe.executor
     lat, ids, diag = [], set(), {}
     sets = [0]
     sim_now = [0]
@@ -113,13 +108,9 @@ def main() -> int:
     node.create_subscription(TrackedSkeletonArray, '/fusion_node/tracks', on_tracks,
                              reliable_qos(1000))
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, reliable_qos(50))
-    pubs = {c: node.create_publisher(Person2DArray, f'/{c}/persons_2d', reliable_qos(100))
-            for c in cams}
+    pubs = probe.camera_publishers(Person2DArray, cams)
     clock = node.create_publisher(Clock, '/clock', 10)
-    t_end = time.monotonic() + 30
-    while time.monotonic() < t_end and not all(
-            p.get_subscription_count() for p in pubs.values()):
-        ex.spin_once(timeout_sec=0.05)
+    probe.spin_until(lambda: all_matched(pubs.values()), 30, step=0.05)
     base = 1_000 * NS
     start = time.monotonic()
     next_print = args.every
@@ -160,26 +151,17 @@ def main() -> int:
                 clk = diag.get('clock', (0, 'n/a', {}))
                 recent = lat[-int(args.every * args.rate):] or [float('nan')]
                 print(f'{t:6.0f} | {rss_mb(proc.pid):6.1f} | {sets[0]:5d} | '
-                      f'{np.percentile(recent, 50):7.1f} / {np.percentile(recent, 95):7.1f} | '
+                      f'{percentile(recent, 50):7.1f} / {percentile(recent, 95):7.1f} | '
                       f'{len(ids):3d} | {sync.get("resets", "?"):>6} | '
                       f'{sync.get("dropped in sync: outlier stamps", "?"):>8} | '
                       f'{sync.get("lost upstream (stamp gaps)", "?"):>4} | '
                       f'{"OK" if clk[0] == 0 else "ERROR"} {clk[1][:60]}', flush=True)
-        end = time.monotonic() + 3
-        while time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
+        probe.spin_for(3)
         sync = diag.get('synchronizer', (0, '', {}))[2]
         print('synchronizer:', ', '.join(f'{k}={v}' for k, v in sync.items()))
     finally:
-        proc.send_signal(2)
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        log.close()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown()
+        proc.interrupt(10)
+        probe.close()
     return 0
 
 

@@ -20,57 +20,24 @@ their rate on the system clock (capture instants, not paced by anyone, no sim ti
 ``pose2d_node`` per camera runs the real model, ``fusion_node`` tracks. Inference skew between
 cameras comes from the machine (three models share the cores) and from the encodings (one
 camera raw bgr8, one yuv422_yuy2, one bgra8). The second test runs the README's rig recipe
-exactly as typed. Figures come from ``bench/bench_rig.py`` (the same probe and analysis).
+exactly as typed. Figures come from ``bench/bench_pipeline.py --publishers`` (the same probe
+and analysis, ``mv3dpose_ros.testing.rig``).
 """
 
 import os
 import re
 import signal
-import subprocess
-import sys
 import time
 
+from mv3dpose_ros.testing.processes import NodeProcess
+from mv3dpose_ros.testing.rig import (analyse, drop_table, PANOPTIC_CALIBRATION,
+                                      PANOPTIC_CAMERAS, published_counts, publisher_command,
+                                      RigProbe)
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, 'bench'))
-import bench_rig  # noqa: E402, I100 - bench/ is no package
-
 NS = 1_000_000_000
 ENCODINGS = {'00_03': 'bgr8', '00_06': 'yuv422_yuy2', '00_12': 'bgra8'}
-
-
-def _start(cmd, log, shell=False):
-    return subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
-                            start_new_session=True, shell=shell,
-                            executable='/bin/bash' if shell else None)
-
-
-def _stop_group(proc, timeout=30.0):
-    """SIGINT the process group we started (Ctrl-C), then SIGTERM / SIGKILL what is left."""
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return proc.wait()
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if proc.poll() is not None:        # reaped: is anything else of its group left?
-                try:
-                    os.killpg(proc.pid, 0)
-                except ProcessLookupError:
-                    return proc.returncode
-            time.sleep(0.2)
-    return proc.wait()
-
-
-def _wait_cameras(probe, n, procs, timeout, log_path):
-    deadline = time.monotonic() + timeout
-    while probe.cameras_answering() < n and time.monotonic() < deadline:
-        for p in procs:
-            assert p.poll() is None, open(log_path).read()[-5000:]
-        time.sleep(0.2)
-    assert probe.cameras_answering() == n, open(log_path).read()[-5000:]
 
 
 @pytest.mark.ros
@@ -79,34 +46,32 @@ def test_free_running_rig_tracks_most_sets(shared_data, model, tmp_path):
     cams = list(ENCODINGS)
     rate, measure_s = 1.0, 30.0
     log_path = tmp_path / 'rig.log'
-    log = open(log_path, 'w')
-    probe = bench_rig.Probe(cams)
+    probe = RigProbe(cams)
     # Three models share two cores here: the cameras' inference finishes up to ~0.3 s apart.
     # A CPU rig sets sync.max_wait_s above that skew; the sets must then all be emitted.
     max_wait = 0.6
-    procs = [_start(['mv3dpose_bringup', '--rig', bench_rig.CALIBRATION, '--cameras', *cams,
-                     '--fusion-param', f'sync.max_wait_s:={max_wait}'], log)]
+    procs = [NodeProcess(['mv3dpose_bringup', '--rig', PANOPTIC_CALIBRATION, '--cameras', *cams,
+                          '--fusion-param', f'sync.max_wait_s:={max_wait}'], log_path, cwd=ROOT)]
     pubs = {}
     for cam, enc in ENCODINGS.items():
         pub_log = tmp_path / f'publisher_{cam}.log'
         pubs[cam] = str(pub_log)
-        procs.append(_start(bench_rig.publisher_command(
-            cam, rate, extra=['--encoding', enc, '--wait-for-subscribers', '1']),
-            open(pub_log, 'w')))
+        procs.append(NodeProcess(publisher_command(
+            cam, rate, extra=['--encoding', enc, '--wait-for-subscribers', '1']), pub_log,
+            cwd=ROOT))
     try:
-        _wait_cameras(probe, len(cams), procs, 150.0, log_path)
+        assert probe.wait_cameras(150.0, procs) == len(cams), procs[0].tail()
         start = time.time_ns() + 3 * NS                       # let the pipeline settle
         time.sleep(3.0 + measure_s + 2.0)
         end = time.time_ns() - 2 * NS
     finally:
         for p in procs[1:]:
-            _stop_group(p)
-        code = _stop_group(procs[0])
-        log.close()
+            p.stop_group()
+        code = procs[0].stop_group()
     time.sleep(1.0)
-    res = bench_rig.analyse(probe, start, end, max_wait_s=max_wait)
-    published = bench_rig.published_counts(pubs)
-    table = bench_rig.drop_table(probe, published)
+    res = analyse(probe, start, end, max_wait_s=max_wait)
+    published = published_counts(pubs)
+    table = drop_table(probe, published)
     status = {cam: (probe.values(f': {cam} inference'), probe.values(f': {cam} input'))
               for cam in cams}
     probe.close()
@@ -159,26 +124,24 @@ def test_readme_recipe_uses_the_installed_names():
 def test_readme_rig_recipe_as_typed_gives_confirmed_tracks(shared_data, model, tmp_path):
     script = _readme_recipe()
     log_path = tmp_path / 'recipe.log'
-    log = open(log_path, 'w')
-    probe = bench_rig.Probe(bench_rig.CAMERAS)
+    probe = RigProbe(PANOPTIC_CAMERAS)
     start = time.time_ns()
-    proc = _start(script, log, shell=True)
+    proc = NodeProcess(script, log_path, cwd=ROOT, shell=True)
     first = answering = None
     try:
         # Generous: five models start and share two cores with the publishers here; the
-        # figure that matters is printed (bench/bench_rig.py measures it too).
+        # figure that matters is printed (bench/bench_pipeline.py --publishers measures it too).
         deadline = time.monotonic() + 240.0
         while time.monotonic() < deadline:
-            assert proc.poll() is None, log_path.read_text()[-5000:]
-            if answering is None and probe.cameras_answering() == len(bench_rig.CAMERAS):
+            assert proc.alive(), proc.tail()
+            if answering is None and probe.cameras_answering() == len(PANOPTIC_CAMERAS):
                 answering = (time.time_ns() - start) / NS
             first = probe.first_confirmed(1, start)
             if probe.first_confirmed(3, start) is not None:
                 break
             time.sleep(0.5)
     finally:
-        code = _stop_group(proc)
-        log.close()
+        code = proc.stop_group()
     three = probe.first_confirmed(3, start)
     counts = [(c, n) for _, _, c, n in probe.tracks]
     probe.close()

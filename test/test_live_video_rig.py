@@ -60,18 +60,17 @@ import collections
 import json
 import math
 import os
-import sys
 import time
 from typing import Dict, List
 
+from mv3dpose_ros.testing.processes import NodeProcess
+from mv3dpose_ros.testing.rig import RigProbe
+from mv3dpose_ros.testing.stats import percentile as _pct
 import numpy as np
 import pytest
+from test_live_rig import readme_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, 'bench'))
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import bench_rig  # noqa: E402, I100 - bench/ is no package
-from test_live_rig import _start, _stop_group, readme_block  # noqa: E402, I100 - shared
 
 NS = 1_000_000_000
 CAMERAS = {'cam_01': 'cam01.mp4', 'cam_02': 'cam02.mp4', 'cam_03': 'cam03.mp4',
@@ -90,8 +89,8 @@ MIN_RATE_HZ = 3.0
 MAX_GAP_S = 3.0
 
 
-class _TracksProbe(bench_rig.Probe):
-    """bench_rig's probe, also keeping each tracks message's skeletons."""
+class _TracksProbe(RigProbe):
+    """The rig probe, also keeping each tracks message's skeletons."""
 
     def __init__(self, cameras: List[str]) -> None:
         self.messages: List[tuple] = []     # (stamp ns, receipt ns, [skeleton, ...])
@@ -141,13 +140,9 @@ def video_rig(shared_data, model, tmp_path_factory):
     probe = _TracksProbe(list(CAMERAS))
     t_start = time.time_ns()
     # The README's recipe as typed: one publisher per camera and `mv3dpose_bringup --rig C`.
-    procs = [_start(readme_video_recipe(), open(log_path, 'w'), shell=True)]
+    procs = [NodeProcess(readme_video_recipe(), log_path, cwd=ROOT, shell=True)]
     try:
-        deadline = time.monotonic() + ANSWER_TIMEOUT_S
-        while probe.cameras_answering() < len(CAMERAS) and time.monotonic() < deadline:
-            for p in procs:
-                assert p.poll() is None, log_path.read_text()[-5000:]
-            time.sleep(0.2)
+        probe.wait_cameras(ANSWER_TIMEOUT_S, procs)
         assert probe.cameras_answering() == len(CAMERAS), (
             f'{probe.cameras_answering()} of {len(CAMERAS)} cameras answered in '
             f'{ANSWER_TIMEOUT_S:g} s', log_path.read_text()[-5000:])
@@ -155,7 +150,7 @@ def video_rig(shared_data, model, tmp_path_factory):
         time.sleep(MEASURE_S)
         t_end = time.time_ns()
     finally:
-        code = _stop_group(procs[0])
+        code = procs[0].stop_group()
         time.sleep(1.0)
         with probe.lock:
             messages = list(probe.messages)
@@ -165,10 +160,6 @@ def video_rig(shared_data, model, tmp_path_factory):
             't_end': t_end, 'frames': frames.pop(), 'code': code,
             'log': log_path.read_text(), 'published': {},
             'folder': tmp}
-
-
-def _pct(values: List[float], p: float) -> float:
-    return float(np.percentile(values, p)) if values else math.nan
 
 
 def _frame(stamp: int, frames: int) -> int:
