@@ -31,9 +31,9 @@ import sys
 import tempfile
 import time
 
-from mv3dpose_ros.commands.convert import persons_topic
 from mv3dpose_ros.io.bag import BagReader, BagWriter, make_qos
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array
+from mv3dpose_ros.ros.names import persons_topic
 from mv3dpose_ros.sim import make_scene
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Header

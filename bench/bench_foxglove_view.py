@@ -40,7 +40,7 @@ from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.io.foxglove_ws import FoxgloveClient
 from mv3dpose_ros.ros.messages import ns_to_stamp, tracks_to_msg
 from mv3dpose_ros.ros.qos import reliable_qos
-from mv3dpose_ros.ros.scene import skeleton_update
+from mv3dpose_ros.viz.scene import skeleton_update
 import numpy as np
 import rclpy
 from std_msgs.msg import Header

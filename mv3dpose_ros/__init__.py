@@ -12,6 +12,19 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Multi-person 3D human pose tracking from calibrated multi-camera rigs (Tanke & Gall 2019)."""
+"""
+Multi-person 3D human pose tracking from calibrated multi-camera rigs (Tanke & Gall 2019).
+
+Packages, in import floors (a package imports only its own floor's permitted neighbours and
+the floors below; ``test/test_layout.py`` checks it):
+
+1. :mod:`.core`: the algorithm, numpy only, no ROS.
+2. :mod:`.viz` (drawing), :mod:`.io` (files, bags, camera inputs; no ROS), :mod:`.ros`
+   (message codecs, names, QoS, parameters, diagnostics).
+3. :mod:`.pose2d` (2D pose estimation), :mod:`.sim` (synthetic rigs with ground truth),
+   :mod:`.eval` (metrics).
+4. :mod:`.nodes` (the ROS 2 nodes), :mod:`.commands` (the ``mv3dpose`` subcommands, run by
+   :mod:`.cli`), :mod:`.testing` (the test and benchmark harness).
+"""
 
 __version__ = '0.1.0'

@@ -19,15 +19,16 @@ import subprocess
 import sys
 
 import cv2
-from mv3dpose_ros.commands.convert import bag_to_jsonl, ConvertError, image_from_message
-from mv3dpose_ros.commands.convert import images_to_bag, jsonl_to_bag, openpose_to_bag
-from mv3dpose_ros.commands.convert import stamp_ns
 from mv3dpose_ros.core.calibration import load_calibration, save_rig_yaml
 from mv3dpose_ros.core.camera import Camera
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.io.bag import BagReader
+from mv3dpose_ros.io.media import SourceError
 from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
 from mv3dpose_ros.io.tracks_jsonl import read_tracks, TracksWriter
+from mv3dpose_ros.ros.bag_convert import bag_to_jsonl, images_to_bag, jsonl_to_bag
+from mv3dpose_ros.ros.bag_convert import openpose_to_bag, stamp_ns
+from mv3dpose_ros.ros.images import image_from_message
 import numpy as np
 import pytest
 
@@ -105,7 +106,7 @@ def test_videos_become_an_image_bag(tmp_path):
 def test_mismatched_camera_names_name_both_sides_and_leave_nothing(tmp_path):
     rig, cams = _rig(tmp_path)
     _image_folders(tmp_path / 'imgs', ['left', 'middle'], [0, 1])
-    with pytest.raises(ConvertError) as err:
+    with pytest.raises(SourceError) as err:
         images_to_bag(str(tmp_path / 'imgs'), rig, str(tmp_path / 'out'), quiet=True)
     text = str(err.value)
     assert 'middle' in text and 'rig.yaml' in text and 'left, right' in text
@@ -115,16 +116,16 @@ def test_mismatched_camera_names_name_both_sides_and_leave_nothing(tmp_path):
 
 def test_missing_inputs_and_wrong_image_size_are_clear_errors(tmp_path):
     rig, cams = _rig(tmp_path)
-    with pytest.raises(ConvertError, match='nowhere'):
+    with pytest.raises(SourceError, match='nowhere'):
         images_to_bag(str(tmp_path / 'nowhere'), rig, str(tmp_path / 'out'), quiet=True)
-    with pytest.raises(ConvertError, match='nocalib.yaml'):
+    with pytest.raises(SourceError, match='nocalib.yaml'):
         images_to_bag(str(tmp_path), str(tmp_path / 'nocalib.yaml'), str(tmp_path / 'o'))
     (tmp_path / 'big' / 'left').mkdir(parents=True)
     (tmp_path / 'big' / 'right').mkdir(parents=True)
     for name in ('left', 'right'):
         cv2.imwrite(str(tmp_path / 'big' / name / 'a_0.png'), np.zeros((H, W, 3), np.uint8))
     cv2.imwrite(str(tmp_path / 'big' / 'right' / 'a_1.png'), np.zeros((2 * H, W, 3), np.uint8))
-    with pytest.raises(ConvertError) as err:
+    with pytest.raises(SourceError) as err:
         images_to_bag(str(tmp_path / 'big'), rig, str(tmp_path / 'out'), quiet=True)
     assert 'a_1.png' in str(err.value) and f'{W}x{H}' in str(err.value)
     assert not (tmp_path / 'out').exists()

@@ -31,12 +31,12 @@ import time
 
 import cv2
 from mv3dpose_ros.commands.bag import play
-from mv3dpose_ros.commands.convert import (bag_to_jsonl, openpose_to_bag, persons_topic,
-                                           tracks_from_bag)
 from mv3dpose_ros.commands.demo import _recorder_cmd, _wait_for_nodes
 from mv3dpose_ros.commands.demo import _write_params, Pipeline, PLAUSIBLE_M, TRACKS_TOPIC
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.io.tracks_jsonl import read_tracks
+from mv3dpose_ros.ros.bag_convert import bag_to_jsonl, openpose_to_bag, tracks_from_bag
+from mv3dpose_ros.ros.names import persons_topic
 import numpy as np
 import pytest
 

@@ -42,9 +42,9 @@ from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.io.foxglove_ws import FoxgloveClient
 from mv3dpose_ros.ros.messages import person2d_array_to_numpy, stamp_to_ns, tracks_to_msg
 from mv3dpose_ros.ros.qos import reliable_qos
-from mv3dpose_ros.ros.scene import frustum_points, latest_entities, render_scene
 from mv3dpose_ros.testing.processes import interrupt
 from mv3dpose_ros.viz.palette import track_rgb
+from mv3dpose_ros.viz.scene import frustum_points, latest_entities, render_scene
 import numpy as np
 import pytest
 import rclpy
@@ -258,7 +258,7 @@ def test_client_receives_decodable_scene_tracks_and_detections(view, tmp_path):
     for bgr in colours:
         assert np.any(np.all(picture == bgr, axis=-1)), f'track colour {bgr} not drawn'
     out = os.environ.get('MV3DPOSE_FOXGLOVE_PNG') or str(tmp_path / 'foxglove_scene.png')
-    from mv3dpose_ros.commands.render import write_png
+    from mv3dpose_ros.viz.pictures import write_png
     write_png(picture, out)
     print(f'\nFoxglove client: {len(got)} messages ({len(tracks_rx)} tracks, {len(scene_rx)} '
           f'scene updates); picture {out}')
@@ -422,7 +422,7 @@ def test_bringup_starts_the_web_view_beside_fusion_node(tmp_path):
 def test_scene_update_deletes_ended_tracks_and_fades_coasting_ones(shared_data):
     """skeleton_update on real tracks: DELETED -> a deletion of its id, COASTING faded."""
     from mv3dpose_ros.ros.messages import msg_to_tracks
-    from mv3dpose_ros.ros.scene import skeleton_update
+    from mv3dpose_ros.viz.scene import skeleton_update
     feed = Pose2Sim(shared_data, frames=10)
     *_, last = Feeder._frames_only(feed)[-1]
     tracks = [t for t in msg_to_tracks(last) if t.state == TrackState.CONFIRMED]

@@ -13,9 +13,22 @@
 # limitations under the License.
 
 """
-The layout's rule: the algorithm and the 2D stage's logic do not depend on ROS.
+The layout's rules: imports run down the floors, the algorithm does not depend on ROS.
 
-``core/`` (the algorithm), ``eval/`` and ``sim/`` import nothing of ROS at all; ``pose2d/``
+Floors, lowest first; a package may import its own modules and those of lower floors:
+
+1. ``core``: the algorithm.
+2. ``viz`` (drawing), ``io`` (files, bags, media, camera inputs), ``ros`` (message adapters,
+   names, QoS). On this floor, ``io`` may use ``viz`` (a received scene as a PNG) and ``ros`` may
+   use ``io`` and ``viz`` (bag conversions, marker colours); ``viz`` uses neither.
+3. ``pose2d``, ``sim``, ``eval``: the 2D stage, the simulator, the metrics (not each other).
+4. ``nodes``, ``commands``, ``testing`` (the test and bench harness), ``cli``: the top. Nodes
+   and commands do not import each other; ``testing`` may use both, ``cli`` loads commands.
+
+No command imports another command, except ``demo``, which runs the others. Function-level
+(lazy) imports count: they are imports all the same.
+
+``core/``, ``viz/``, ``io/``, ``eval/`` and ``sim/`` import nothing of ROS at all; ``pose2d/``
 (models, inference, the inference-rate policy) nothing at module level (``fetch`` reads a
 rosbag2 bag's images inside one function, for calibration). The nodes are the adapters.
 """
@@ -29,7 +42,16 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PACKAGE = os.path.join(ROOT, 'mv3dpose_ros')
-ROS_FREE = {'core': 'anywhere', 'eval': 'anywhere', 'sim': 'anywhere', 'pose2d': 'module level'}
+ROS_FREE = {'core': 'anywhere', 'viz': 'anywhere', 'io': 'anywhere', 'eval': 'anywhere',
+            'sim': 'anywhere', 'pose2d': 'module level'}
+FLOORS = (('core',), ('viz', 'io', 'ros'), ('pose2d', 'sim', 'eval'),
+          ('nodes', 'commands', 'testing', 'cli'))
+FLOOR = {package: level for level, floor in enumerate(FLOORS) for package in floor}
+#: Imports allowed between different packages of one floor: (importer, imported).
+SIDEWAYS = {('io', 'viz'), ('ros', 'io'), ('ros', 'viz'),
+            ('testing', 'nodes'), ('testing', 'commands'), ('cli', 'commands')}
+#: The one command that may import other commands (it runs them).
+RUNS_COMMANDS = 'demo'
 
 
 def _is_ros(module: str) -> bool:
@@ -52,6 +74,106 @@ def _ros_imports(path: str, module_level_only: bool):
         for name in names:
             if _is_ros(name):
                 yield f'{os.path.relpath(path, ROOT)}:{node.lineno} imports {name}'
+
+
+def _modules():
+    """Yield ``(dotted name, path)`` of every module of the package."""
+    for folder, dirs, files in os.walk(PACKAGE):
+        dirs[:] = sorted(d for d in dirs if d != '__pycache__')
+        for name in sorted(files):
+            if name.endswith('.py'):
+                path = os.path.join(folder, name)
+                parts = os.path.relpath(path[:-3], ROOT).split(os.sep)
+                yield '.'.join(parts[:-1] if parts[-1] == '__init__' else parts), path
+
+
+def _package_imports(module: str, path: str, module_level_only: bool = False):
+    """Yield ``(line, imported module)`` for each import of an ``mv3dpose_ros`` module."""
+    tree = ast.parse(open(path).read(), path)
+    is_package = path.endswith('__init__.py')
+    nodes = tree.body if module_level_only else ast.walk(tree)
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:                                   # relative: resolve it
+                parts = module.split('.')
+                keep = len(parts) - node.level + (1 if is_package else 0)
+                base = '.'.join(parts[:keep] + ([base] if base else []))
+            # `from mv3dpose_ros.x import y`: y may be a module of x
+            targets = [f'{base}.{a.name}' if os.path.exists(
+                os.path.join(ROOT, *base.split('.'), a.name + '.py')) or os.path.isdir(
+                os.path.join(ROOT, *base.split('.'), a.name)) else base for a in node.names]
+        else:
+            continue
+        for target in sorted(set(targets)):
+            if target == 'mv3dpose_ros' or target.startswith('mv3dpose_ros.'):
+                yield node.lineno, target
+
+
+def _package_of(module: str) -> str:
+    parts = module.split('.')
+    return parts[1] if len(parts) > 1 else ''
+
+
+def test_every_package_has_a_floor():
+    packages = {_package_of(m) for m, _ in _modules()} - {''}
+    assert packages <= set(FLOOR), f'no floor for {sorted(packages - set(FLOOR))}'
+
+
+def test_imports_run_down_the_floors():
+    """No module imports a higher floor, nor a package beside it that the floors forbid."""
+    found = []
+    for module, path in _modules():
+        mine = _package_of(module)
+        for line, target in _package_imports(module, path):
+            theirs = _package_of(target)
+            if not mine or not theirs or theirs == mine:
+                continue
+            if FLOOR[theirs] > FLOOR[mine] or (FLOOR[theirs] == FLOOR[mine]
+                                               and (mine, theirs) not in SIDEWAYS):
+                found.append(f'{os.path.relpath(path, ROOT)}:{line}: {mine} (floor '
+                             f'{FLOOR[mine] + 1}) imports {target} (floor {FLOOR[theirs] + 1})')
+    assert not found, '\n'.join(found)
+
+
+def test_no_command_imports_another_but_the_demo():
+    found = []
+    for module, path in _modules():
+        if _package_of(module) != 'commands' or module.split('.')[-1] in (RUNS_COMMANDS,
+                                                                          'commands'):
+            continue
+        for line, target in _package_imports(module, path):
+            if _package_of(target) == 'commands' and target != module:
+                found.append(f'{os.path.relpath(path, ROOT)}:{line} imports {target}')
+    assert not found, '\n'.join(found)
+
+
+def test_no_import_cycles_between_modules():
+    """Module-level imports form no cycle (a cycle half-initialises a module on import)."""
+    modules = dict(_modules())
+    graph = {m: {t if t in modules else t.rsplit('.', 1)[0]
+                 for _, t in _package_imports(m, p, module_level_only=True)} - {m}
+             for m, p in modules.items()}
+    state = {}
+
+    def visit(m, stack):
+        state[m] = 'open'
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == 'open':
+                return stack[stack.index(n):] + [n] if n in stack else [m, n]
+            if n not in state:
+                cycle = visit(n, stack + [n])
+                if cycle:
+                    return cycle
+        state[m] = 'done'
+        return None
+
+    for m in sorted(graph):
+        if m not in state:
+            cycle = visit(m, [m])
+            assert cycle is None, ' -> '.join(cycle)
 
 
 @pytest.mark.parametrize('package', sorted(ROS_FREE))

@@ -14,9 +14,8 @@
 
 """The one camera-name -> ROS-name mapping (ros/names.py) and topic pattern checks."""
 
-from mv3dpose_ros.commands.convert import image_topic, persons_topic
-from mv3dpose_ros.ros.names import camera_namespace, camera_topic, check_pattern, RosNameError
-from mv3dpose_ros.ros.names import topic_problem
+from mv3dpose_ros.ros.names import camera_namespace, camera_topic, check_pattern, image_topic
+from mv3dpose_ros.ros.names import persons_topic, RosNameError, topic_problem
 import pytest
 from rclpy.validate_full_topic_name import validate_full_topic_name
 

@@ -176,8 +176,8 @@ def test_int8_calibrated_on_a_recorded_bag_finds_the_three_people(shared_data, t
     about 18 px against 640x640).
     """
     from mv3dpose_ros.cli import main as cli_main
-    from mv3dpose_ros.commands.convert import images_to_bag
     from mv3dpose_ros.pose2d.models import model_file, read_sidecar, sidecar_file
+    from mv3dpose_ros.ros.bag_convert import images_to_bag
     size = (192, 320)
     fp32 = model_file('yolo11n-pose', size, None, 'fp32')
     if not os.path.isfile(fp32):

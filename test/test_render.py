@@ -19,13 +19,14 @@ import subprocess
 import sys
 
 import cv2
-from mv3dpose_ros.commands.convert import jsonl_to_bag
-from mv3dpose_ros.commands.render import render_tracks, RenderError
+from mv3dpose_ros.commands.render import render_tracks
 from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.io.tracks_jsonl import TracksWriter
+from mv3dpose_ros.ros.bag_convert import jsonl_to_bag
 from mv3dpose_ros.sim.scene import make_scene
 from mv3dpose_ros.viz.palette import PALETTE, track_colour
+from mv3dpose_ros.viz.pictures import RenderError
 import numpy as np
 import pytest
 

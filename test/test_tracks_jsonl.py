@@ -134,7 +134,7 @@ def test_line_that_is_not_utf8_is_reported_and_skipped(tmp_path):
 
 def test_position_source_round_trip_and_default(tmp_path):
     """What position is travels with it; files from before the field read as hips."""
-    from mv3dpose_ros.commands.convert import record_to_track
+    from mv3dpose_ros.ros.bag_convert import record_to_track
     body = make_track(1)
     body.position_source = PositionSource.BODY
     unknown = make_track(2)

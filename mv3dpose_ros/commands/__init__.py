@@ -12,4 +12,20 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Subcommands of the `mv3dpose` command line tool, one module each."""
+"""
+Subcommands of the ``mv3dpose`` command line tool, one module each.
+
+Each exposes ``add_arguments(parser)`` and ``run(args) -> int``; ``mv3dpose_ros.cli`` lists
+them and imports a module only when its subcommand runs. Commands hold the command line and
+its orchestration; what other code needs lives below them (``io``, ``ros``, ``viz``), and no
+command imports another except ``demo``, which runs the others.
+
+- :mod:`.detect`: 2D poses of per-camera image folders or videos as OpenPose JSON (offline).
+- :mod:`.track`: 3D tracks from per-camera OpenPose JSON folders (offline).
+- :mod:`.eval`: score a tracks file against ground truth (PCP, MPJPE, MOTA).
+- :mod:`.model`: fetch, list, locate and inspect the 2D pose models.
+- :mod:`.bag`: record, play and inspect rosbag2 files without ``ros2 bag``.
+- :mod:`.convert`: images, OpenPose JSON and tracks to and from bags.
+- :mod:`.render`: tracks as PNG, GIF or video pictures.
+- :mod:`.demo`: the live pipeline end to end over DDS, with a summary and a picture.
+"""

@@ -42,8 +42,32 @@ import sys
 import time
 from typing import Dict, List, Optional, Sequence
 
+from mv3dpose_msgs.msg import TrackedSkeletonArray
+from mv3dpose_ros.commands.bag import play
+from mv3dpose_ros.commands.render import render_tracks
+from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, TrackState
+from mv3dpose_ros.eval.mot import evaluate_mot
+from mv3dpose_ros.eval.mpjpe import mpjpe
+from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, make_qos
+from mv3dpose_ros.io.cameras import camera_sources, load_cameras
+from mv3dpose_ros.io.media import SourceError
+from mv3dpose_ros.pose2d.models import ModelNotFound, read_sidecar, resolve_model_path
+from mv3dpose_ros.ros.bag_convert import bag_to_jsonl, images_to_bag
+from mv3dpose_ros.ros.messages import msg_to_tracks, ns_to_stamp, numpy_to_person2d_array
+from mv3dpose_ros.ros.messages import stamp_to_ns
+from mv3dpose_ros.ros.names import camera_namespace, image_topic, PERSONS_TOPIC, persons_topic
+from mv3dpose_ros.ros.params import package_search_dirs
+from mv3dpose_ros.sim.scene import make_scene
 import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Header
+import yaml
 
 START_TIME = 1_700_000_000.0      # [s] stamp of the first frame (fixed: reproducible bags)
 TRACKS_TOPIC = '/fusion_node/tracks'
@@ -71,7 +95,6 @@ def _say(text: str) -> None:
 
 def config_file(name: str) -> str:
     """Return the path of a shipped config file (installed share dir, else the source tree)."""
-    from mv3dpose_ros.ros.params import package_search_dirs
     source = str(Path(__file__).resolve().parents[2])   # a checkout (symlink-installed too)
     for base in [source] + package_search_dirs():
         path = os.path.join(base, 'config', name)
@@ -141,7 +164,6 @@ class Pipeline:
 
 
 def _write_params(path: Path, sections: Dict[str, dict]) -> str:
-    import yaml
     path.write_text(yaml.safe_dump({k: {'ros__parameters': v} for k, v in sections.items()},
                                    sort_keys=False))
     return str(path)
@@ -149,7 +171,7 @@ def _write_params(path: Path, sections: Dict[str, dict]) -> str:
 
 def input_topic_pattern(cameras: Sequence[str]) -> str:
     """Return fusion_node's ``input_topic``: ``{camera}`` maps to ``persons_topic``'s names."""
-    return '/{camera}/persons_2d'
+    return PERSONS_TOPIC
 
 
 def _fusion_cmd(params: str) -> List[str]:
@@ -181,10 +203,6 @@ def _wait_graph(node, executor, pipeline: Pipeline, subscribed: Sequence[str],
 
 def read_output(bag: Path) -> List[dict]:
     """Return the recorded tracks messages: stamp, receive time, layout, Track list."""
-    from mv3dpose_msgs.msg import TrackedSkeletonArray
-    from mv3dpose_ros.io.bag import BagReader
-    from mv3dpose_ros.ros.messages import msg_to_tracks, stamp_to_ns
-    from rclpy.serialization import deserialize_message
     out = []
     with BagReader(bag) as reader:
         if TRACKS_TOPIC not in reader.topics():
@@ -202,7 +220,6 @@ def _observed(tracks) -> list:
 
 def bone_lengths(frames: Sequence[dict], layout: str) -> Dict[str, List[float]]:
     """Collect bone lengths [m] of observed tracks with both joints triangulated."""
-    from mv3dpose_ros.core.skeleton import get_layout
     lay = get_layout(layout)
     out: Dict[str, List[float]] = {}
     for name, pairs in BONES.items():
@@ -240,7 +257,6 @@ def _stats(values) -> str:
 # ------------------------------------------------------------------------------------ runs
 
 def _player(bag: Path, ctx, published: Dict[int, int], quiet: bool, **kwargs) -> int:
-    from mv3dpose_ros.commands.bag import play
 
     def on_publish(topic: str, stamp: int) -> None:
         published[stamp] = time.time_ns()   # the last input of a time point counts
@@ -272,16 +288,6 @@ def _play_and_collect(pipeline: 'Pipeline', ctx, input_bag: Path, output_bag: Pa
 
 def run_synthetic(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     """Run a simulated rig -> Person2DArray bag -> player -> fusion_node -> recorder; score it."""
-    from mv3dpose_ros.commands.convert import persons_topic
-    from mv3dpose_ros.core.calibration import save_rig_yaml
-    from mv3dpose_ros.eval.mot import evaluate_mot
-    from mv3dpose_ros.eval.mpjpe import mpjpe
-    from mv3dpose_ros.io.bag import BagWriter, make_qos
-    from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array
-    from mv3dpose_ros.sim.scene import make_scene
-    from rclpy.serialization import serialize_message
-    from std_msgs.msg import Header
-
     scene = make_scene(num_cameras=args.cameras, num_people=args.people,
                        num_frames=args.frames, fps=args.fps, seed=args.seed,
                        start_stamp=START_TIME)
@@ -380,7 +386,6 @@ def find_calibration(folder: str) -> str:
 
 def ensure_model(name: str) -> str:
     """Return the ONNX path of a 2D pose model, fetching it on first use."""
-    from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
     try:
         return resolve_model_path(name)
     except ModelNotFound:
@@ -394,10 +399,6 @@ def ensure_model(name: str) -> str:
 
 def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     """Run image folders -> image bag -> player -> pose2d_node x N -> fusion_node -> recorder."""
-    from mv3dpose_ros.commands.convert import camera_namespace, camera_sources, image_topic
-    from mv3dpose_ros.commands.convert import images_to_bag, load_cameras, persons_topic
-    from mv3dpose_ros.pose2d.models import read_sidecar
-
     folder = args.images
     if not os.path.isdir(folder):
         raise DemoError(f'{folder}: image folder does not exist')
@@ -480,8 +481,6 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
 
 def _wait_for_nodes(ctx, pipeline: Pipeline, inputs: Sequence[str], timeout: float,
                     published: Sequence[str] = ()) -> None:
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     node = Node('mv3dpose_demo_probe', context=ctx)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
@@ -495,8 +494,6 @@ def _wait_for_nodes(ctx, pipeline: Pipeline, inputs: Sequence[str], timeout: flo
 
 def _render(run_dir: Path, output_bag: Path, calibration, images, args, summary: dict,
             title: str) -> None:
-    from mv3dpose_ros.commands.convert import bag_to_jsonl
-    from mv3dpose_ros.commands.render import render_tracks
     tracks = run_dir / 'tracks.jsonl'
     bag_to_jsonl(str(output_bag), str(tracks), topic=TRACKS_TOPIC)
     png = run_dir / 'demo.png'
@@ -555,11 +552,6 @@ def _prepare_dir(path: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``mv3dpose demo``."""
-    import rclpy
-    from mv3dpose_ros.commands.convert import ConvertError
-    from mv3dpose_ros.io.bag import BagError
-    from rclpy.signals import SignalHandlerOptions
-
     env = dict(os.environ)
     domain = args.domain_id if args.domain_id is not None else (
         int(env['ROS_DOMAIN_ID']) if env.get('ROS_DOMAIN_ID', '').isdigit()
@@ -581,7 +573,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     try:
         summary = (run_images if args.images else run_synthetic)(args, run_dir, env, ctx)
-    except (DemoError, BagError, ConvertError, OSError, ValueError) as exc:
+    except (DemoError, BagError, SourceError, OSError, ValueError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
     finally:

@@ -45,8 +45,16 @@ import os
 import sys
 from typing import Dict, Iterator, List, Optional, Tuple
 
+import cv2
 from mv3dpose_ros.core.camera import fit_image_size, IMAGE_SIZE_TOLERANCE_PX, ImageFit
+from mv3dpose_ros.io.cameras import camera_sources, load_cameras
+from mv3dpose_ros.io.media import frame_key, list_images, read_video, SourceError
+from mv3dpose_ros.io.media import VIDEO_EXTENSIONS, video_fps
+from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
+from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
+from mv3dpose_ros.pose2d.models import ModelNotFound, parse_size, resolve_model_path
 import numpy as np
+from tqdm import tqdm
 
 LAYOUT = 'coco17'
 
@@ -84,20 +92,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _sources(root: str, calibration: Optional[str], cameras: Optional[List[str]]
              ) -> Tuple[Dict[str, str], dict, List[str]]:
     """Return ``(camera -> folder or video, calibrated cameras, notes)``."""
-    from mv3dpose_ros.commands.convert import camera_sources, ConvertError, load_cameras
-    from mv3dpose_ros.io.media import VIDEO_EXTENSIONS
     notes: List[str] = []
     if calibration:
         cams = load_cameras(calibration, cameras)
         found, ignored = camera_sources(root, list(cams), calibration, strict=False)
         if cameras and ignored:
-            raise ConvertError(f'{root}: no folder or video for camera(s) {", ".join(ignored)}')
+            raise SourceError(f'{root}: no folder or video for camera(s) {", ".join(ignored)}')
         if ignored:
             shown = ', '.join(ignored[:5]) + (', ...' if len(ignored) > 5 else '')
             notes.append(f'{len(ignored)} calibrated camera(s) have no images: {shown}')
         return found, cams, notes
     if not os.path.isdir(root):
-        raise ConvertError(f'{root}: input folder does not exist')
+        raise SourceError(f'{root}: input folder does not exist')
     found = {}
     for entry in sorted(os.listdir(root)):
         path = os.path.join(root, entry)
@@ -108,11 +114,11 @@ def _sources(root: str, calibration: Optional[str], cameras: Optional[List[str]]
     if cameras:
         missing = [c for c in cameras if c not in found]
         if missing:
-            raise ConvertError(f'{root}: no folder or video named {", ".join(missing)} '
-                               f'(found: {", ".join(found) or "nothing"})')
+            raise SourceError(f'{root}: no folder or video named {", ".join(missing)} '
+                              f'(found: {", ".join(found) or "nothing"})')
         found = {c: found[c] for c in cameras}
     if not found:
-        raise ConvertError(f'{root}: no per-camera image folders or video files inside')
+        raise SourceError(f'{root}: no per-camera image folders or video files inside')
     return found, {}, notes
 
 
@@ -122,9 +128,6 @@ def _frames(path: str) -> Tuple[int, float, Iterator[Tuple[int, str, Optional[np
 
     ``fps`` is the video's rate (0 for image folders or when the video does not say).
     """
-    import cv2
-
-    from mv3dpose_ros.commands.convert import _read_video, _video_fps, frame_key, list_images
     if os.path.isdir(path):
         files = list_images(path)
         numbered = all(frame_key(f) is not None for f in files)
@@ -139,14 +142,12 @@ def _frames(path: str) -> Tuple[int, float, Iterator[Tuple[int, str, Optional[np
     cap.release()
 
     def video() -> Iterator[Tuple[int, str, Optional[np.ndarray]]]:
-        for i, frame in enumerate(_read_video(path)):
+        for i, frame in enumerate(read_video(path)):
             yield i, f'{path} frame {i}', frame
-    return max(0, count), _video_fps(path), video()
+    return max(0, count), video_fps(path), video()
 
 
 def _estimator(args):
-    from mv3dpose_ros.pose2d.estimator import open_estimator
-    from mv3dpose_ros.pose2d.models import parse_size, resolve_model_path
     path = args.model_path or resolve_model_path(args.model, args.size)
     return open_estimator(path, threads=args.threads,
                           input_size=parse_size(args.size) if args.size and args.model_path
@@ -177,14 +178,10 @@ def _image_fit(cam: str, calib, image: np.ndarray, tolerance_px: int
 
 def run(args) -> int:
     """Detect 2D poses in every image of every camera and write OpenPose JSON."""
-    from mv3dpose_ros.commands.convert import ConvertError
-    from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
-    from mv3dpose_ros.pose2d.estimator import ModelError
-    from mv3dpose_ros.pose2d.models import ModelNotFound
     try:
         sources, cams, notes = _sources(args.images, args.calibration, args.cameras)
         estimator = _estimator(args)
-    except (ConvertError, ModelError, ModelNotFound, ValueError, OSError) as exc:
+    except (SourceError, ModelError, ModelNotFound, ValueError, OSError) as exc:
         print(f'mv3dpose detect: error: {exc}', file=sys.stderr)
         return 2
     for note in notes:
@@ -194,7 +191,6 @@ def run(args) -> int:
     print(f'{len(sources)} cameras ({", ".join(sources)}), {total} images; model '
           f'{estimator.path} ({estimator.family}, input {estimator.input_size[0]}x'
           f'{estimator.input_size[1]}, weights licence: {estimator.licence})', file=sys.stderr)
-    from tqdm import tqdm
     bar = tqdm(total=total or None, unit='image', desc='detecting', file=sys.stderr,
                disable=True if args.no_progress else None, leave=False)
     written, failed, people = 0, [], []

@@ -31,19 +31,22 @@ import sys
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
+from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, TrackState
+from mv3dpose_ros.io.bag import bag_path_type, BagError, BagReader, deserialize
+from mv3dpose_ros.io.cameras import camera_sources, load_cameras, time_points
+from mv3dpose_ros.io.media import SourceError
+from mv3dpose_ros.io.tracks_jsonl import frame_to_line, parse_line, read_tracks
+from mv3dpose_ros.ros.bag_convert import tracks_from_bag
+from mv3dpose_ros.ros.names import image_topic
 from mv3dpose_ros.viz.palette import track_colour
+from mv3dpose_ros.viz.panels import AXIS_TEXT, draw_label, draw_skeleton, FONT, valid_joints
+from mv3dpose_ros.viz.panels import View
+from mv3dpose_ros.viz.pictures import RenderError, write_animation, write_png
 import numpy as np
+from tqdm import tqdm
 
-BACKGROUND = (250, 250, 250)
-GRID = (225, 225, 225)
-AXIS_TEXT = (110, 110, 110)
-FONT = cv2.FONT_HERSHEY_SIMPLEX
 PANEL = 600           # [px] size of the top and side views
-
-
-class RenderError(ValueError):
-    """Input that cannot be rendered; the text names the file and the reason."""
 
 
 # ------------------------------------------------------------------------------------ input
@@ -56,12 +59,9 @@ def load_frames(path: str, topic: Optional[str] = None,
     Bag frames are numbered by message order and carry the header stamp in seconds. Bad
     lines of a JSON Lines file are skipped and appended to ``issues``.
     """
-    from mv3dpose_ros.io.bag import bag_path_type
-    from mv3dpose_ros.io.tracks_jsonl import frame_to_line, parse_line, read_tracks
     if not os.path.exists(path):
         raise RenderError(f'{path}: tracks file or bag does not exist')
     if bag_path_type(path) == 'bag':
-        from mv3dpose_ros.commands.convert import tracks_from_bag
         # one schema for both inputs: bag tracks go through the JSON Lines record type
         return [parse_line(frame_to_line(i, tracks, layout, stamp * 1e-9))
                 for i, (stamp, layout, tracks) in enumerate(tracks_from_bag(path, topic))]
@@ -77,15 +77,7 @@ def _live(frame) -> list:
     return [t for t in frame.tracks if t.state != TrackState.DELETED]
 
 
-def _joints_valid(track) -> np.ndarray:
-    ok = np.isfinite(track.joints).all(axis=1)
-    if track.joint_state is not None and len(track.joint_state) == len(ok):
-        ok &= np.asarray(track.joint_state) != JointState.MISSING
-    return ok
-
-
 def _layout_of(frames, layout: Optional[str]):
-    from mv3dpose_ros.core.skeleton import get_layout
     name = layout or next((f.layout for f in frames if f.layout), None)
     if not name:
         raise RenderError('the tracks do not name their skeleton layout; pass --layout')
@@ -94,7 +86,7 @@ def _layout_of(frames, layout: Optional[str]):
 
 def _root(track, layout) -> np.ndarray:
     """Return the hip midpoint, else the track's root position, else the joint mean."""
-    ok = _joints_valid(track)
+    ok = valid_joints(track)
     a, b = layout.root_joints
     if ok[a] and ok[b]:
         return 0.5 * (track.joints[a] + track.joints[b])
@@ -102,86 +94,6 @@ def _root(track, layout) -> np.ndarray:
     if pos is not None and np.all(np.isfinite(pos)) and np.any(np.asarray(pos) != 0):
         return np.asarray(pos, dtype=float)
     return track.joints[ok].mean(axis=0) if ok.any() else np.full(3, np.nan)
-
-
-# ------------------------------------------------------------------------------------ views
-
-class View:
-    """A metric orthographic view: world axes (a, b) onto a panel, equal scale on both."""
-
-    def __init__(self, title: str, axes: Tuple[int, int], lo: np.ndarray, hi: np.ndarray,
-                 size: Tuple[int, int], names: Tuple[str, str]):
-        """Fit the box ``lo``..``hi`` (metres, two values each) into ``size`` (w, h) px."""
-        self.title, self.axes, self.names = title, axes, names
-        self.w, self.h = size
-        margin_top, margin = 34, 30
-        span = np.maximum(hi - lo, 1e-3)
-        self.scale = min((self.w - 2 * margin) / span[0], (self.h - margin_top - margin) / span[1])
-        centre = 0.5 * (lo + hi)
-        self.origin = np.array([self.w / 2, margin_top + (self.h - margin_top - margin) / 2])
-        self.centre = centre
-        self.flip = False         # True: the first axis grows to the left
-
-    def px(self, X: np.ndarray) -> np.ndarray:
-        """Map world points ``[..., 3]`` to panel pixels ``[..., 2]`` (second axis up)."""
-        X = np.asarray(X, dtype=float)
-        d = np.stack([X[..., self.axes[0]], X[..., self.axes[1]]], axis=-1) - self.centre
-        return self.origin + d * np.array([-self.scale if self.flip else self.scale,
-                                           -self.scale])
-
-    def blank(self) -> np.ndarray:
-        """Return the panel with its metre grid, axis names and title."""
-        img = np.full((self.h, self.w, 3), BACKGROUND, np.uint8)
-        half = np.array([self.w, self.h]) / (2 * self.scale)
-        lo, hi = self.centre - half, self.centre + half
-        step = 1.0 if max(hi - lo) > 3 else 0.5
-        for k, (a, b) in enumerate(zip(lo, hi)):
-            for v in np.arange(math.ceil(a / step) * step, b, step):
-                sign = (-1 if self.flip else 1) if k == 0 else -1
-                p = self.origin[k] + (v - self.centre[k]) * self.scale * sign
-                p = int(round(p))
-                if k == 0:
-                    cv2.line(img, (p, 30), (p, self.h), GRID, 1)
-                    cv2.putText(img, f'{v:g}', (p + 2, self.h - 6), FONT, 0.35, AXIS_TEXT, 1,
-                                cv2.LINE_AA)
-                elif p > 30:
-                    cv2.line(img, (0, p), (self.w, p), GRID, 1)
-                    cv2.putText(img, f'{v:g}', (3, p - 3), FONT, 0.35, AXIS_TEXT, 1,
-                                cv2.LINE_AA)
-        cv2.putText(img, f'{self.names[0]} [m]', (8 if self.flip else self.w - 60,
-                    self.h - 20), FONT, 0.45, AXIS_TEXT, 1, cv2.LINE_AA)
-        cv2.putText(img, f'{self.names[1]} [m]', (22, 46), FONT, 0.45, AXIS_TEXT, 1,
-                    cv2.LINE_AA)
-        cv2.rectangle(img, (0, 0), (self.w, 26), (235, 235, 235), -1)
-        cv2.putText(img, self.title, (8, 19), FONT, 0.55, (40, 40, 40), 1, cv2.LINE_AA)
-        cv2.rectangle(img, (0, 0), (self.w - 1, self.h - 1), (200, 200, 200), 1)
-        return img
-
-
-def _draw_skeleton(img: np.ndarray, uv: np.ndarray, ok: np.ndarray, bones, colour,
-                   thickness: int, radius: int, predicted: Optional[np.ndarray] = None,
-                   dim: bool = False) -> None:
-    if dim:
-        colour = tuple(int(0.45 * c + 0.55 * 255) for c in colour)
-    pts = np.round(np.nan_to_num(uv)).astype(np.int64)
-    for a, b in bones:
-        if ok[a] and ok[b]:
-            cv2.line(img, tuple(map(int, pts[a])), tuple(map(int, pts[b])), colour, thickness,
-                     cv2.LINE_AA)
-    for j in np.flatnonzero(ok):
-        hollow = predicted is not None and predicted[j]
-        cv2.circle(img, tuple(map(int, pts[j])), radius, colour, 1 if hollow else -1,
-                   cv2.LINE_AA)
-
-
-def _label(img: np.ndarray, text: str, at: Sequence[float], colour, scale: float = 0.5,
-           thickness: int = 1) -> None:
-    x, y = int(round(at[0])), int(round(at[1]))
-    (tw, th), base = cv2.getTextSize(text, FONT, scale, thickness)
-    x = min(max(x - tw // 2, 0), img.shape[1] - tw - 1)
-    y = min(max(y, th + 2), img.shape[0] - base - 1)
-    cv2.rectangle(img, (x - 2, y - th - 2), (x + tw + 2, y + base), (255, 255, 255), -1)
-    cv2.putText(img, text, (x, y), FONT, scale, colour, thickness, cv2.LINE_AA)
 
 
 class Renderer:
@@ -193,7 +105,7 @@ class Renderer:
         self.frames = frames
         self.layout = _layout_of(frames, layout)
         self.cameras = dict(cameras or {})
-        pts = [t.joints[_joints_valid(t)] for f in frames for t in _live(f)]
+        pts = [t.joints[valid_joints(t)] for f in frames for t in _live(f)]
         pts = np.concatenate(pts) if pts else np.zeros((0, 3))
         if len(pts) and pts.shape[1] != 3:
             raise RenderError('joints are not 3D')
@@ -249,7 +161,7 @@ class Renderer:
                 cv2.polylines(top, [uv.reshape(-1, 1, 2)], False, track_colour(tid), 1,
                               cv2.LINE_AA)
         for t in _live(frame):
-            ok = _joints_valid(t)
+            ok = valid_joints(t)
             if not ok.any():
                 continue
             colour = track_colour(t.id)
@@ -258,11 +170,11 @@ class Renderer:
             dim = t.state == TrackState.COASTING
             head = t.joints[ok][np.argmax(t.joints[ok][:, 2])]
             for view, img in [(self.top, top)] + list(zip(self.sides, sides)):
-                _draw_skeleton(img, view.px(t.joints), ok, self.layout.bones, colour, 2, 3,
-                               predicted, dim)
+                draw_skeleton(img, view.px(t.joints), ok, self.layout.bones, colour, 2, 3,
+                              predicted, dim)
                 at = (view.px(t.joints[ok].mean(0)) - [0, 16] if view is self.top
                       else view.px(head) - [0, 10])
-                _label(img, f'#{t.id}', at, colour, 0.5, 1)
+                draw_label(img, f'#{t.id}', at, colour, 0.5, 1)
         legend = 'hollow joint = predicted, pale skeleton = coasting'
         cv2.putText(sides[1], legend, (self.sides[1].w - 330, 19), FONT, 0.38, AXIS_TEXT, 1,
                     cv2.LINE_AA)
@@ -282,23 +194,23 @@ class Renderer:
             img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img.copy()
             thick = max(2, int(round(img.shape[1] / 320)))
             for t in _live(frame):
-                ok = _joints_valid(t)
+                ok = valid_joints(t)
                 if not ok.any():
                     continue
                 uv = cam.project(t.joints)
                 ok = ok & np.isfinite(uv).all(axis=1)
                 if not ok.any():
                     continue
-                _draw_skeleton(img, uv, ok, self.layout.bones, track_colour(t.id), thick,
-                               thick + 1, dim=t.state == TrackState.COASTING)
+                draw_skeleton(img, uv, ok, self.layout.bones, track_colour(t.id), thick,
+                              thick + 1, dim=t.state == TrackState.COASTING)
                 top = uv[ok][np.argmin(uv[ok][:, 1])]
-                _label(img, f'#{t.id}', top - [0, 3 * thick], track_colour(t.id),
-                       0.35 * thick, max(1, thick // 2))
+                draw_label(img, f'#{t.id}', top - [0, 3 * thick], track_colour(t.id),
+                           0.35 * thick, max(1, thick // 2))
             scale = tile_w / img.shape[1]
             tile = cv2.resize(img, (tile_w, int(round(img.shape[0] * scale))),
                               interpolation=cv2.INTER_AREA)
             cv2.rectangle(tile, (0, 0), (tile_w - 1, tile.shape[0] - 1), (200, 200, 200), 1)
-            _label(tile, name, (40, 18), (30, 30, 30), 0.5, 1)
+            draw_label(tile, name, (40, 18), (30, 30, 30), 0.5, 1)
             tiles.append(tile)
         h = max(t.shape[0] for t in tiles)
         rows = []
@@ -358,7 +270,6 @@ class ImageSource:
 
     def __init__(self, path: str, cameras: Sequence[str], frames: list):
         """Index ``path`` (per-camera folders or an image bag) for the given frames."""
-        from mv3dpose_ros.io.bag import bag_path_type
         self.path = path
         self.frames = frames
         self._bag: Dict[str, Dict[int, bytes]] = {}
@@ -368,14 +279,11 @@ class ImageSource:
         if bag_path_type(path) == 'bag':
             self._index_bag(cameras)
         else:
-            from mv3dpose_ros.commands.convert import _time_points, camera_sources
             sources, _ = camera_sources(path, list(cameras), strict=False)
-            _, self._table = _time_points(
+            _, self._table = time_points(
                 {c: p for c, p in sources.items() if os.path.isdir(p)})
 
     def _index_bag(self, cameras: Sequence[str]) -> None:
-        from mv3dpose_ros.commands.convert import image_topic
-        from mv3dpose_ros.io.bag import BagReader
         wanted = {image_topic(c): c for c in cameras}
         with BagReader(self.path) as reader:
             topics = [t for t in reader.topics() if t in wanted]
@@ -383,7 +291,6 @@ class ImageSource:
                 raise RenderError(f'{self.path}: no image topic of the calibrated cameras '
                                   f'({", ".join(wanted)})')
             stamps = {int(round(f.stamp * 1e9)) for f in self.frames if f.stamp is not None}
-            from mv3dpose_ros.io.bag import deserialize
             for m in reader.messages(topics):
                 header = deserialize(m.data, m.msgtype).header
                 ns = header.stamp.sec * 10 ** 9 + header.stamp.nanosec
@@ -394,8 +301,7 @@ class ImageSource:
         """Return camera -> BGR image for frame ``index`` (cameras without one are left out)."""
         out = {}
         if self._bag:
-            from mv3dpose_ros.commands.convert import image_from_message
-            from mv3dpose_ros.io.bag import deserialize
+            from mv3dpose_ros.ros.images import image_from_message  # ROS: image bags only
             stamp = self.frames[index].stamp
             ns = None if stamp is None else int(round(stamp * 1e9))
             for cam, by_stamp in self._bag.items():
@@ -421,78 +327,21 @@ def _near(ns: int, stamps, tolerance_ns: int = 1_000_000) -> Optional[int]:
 
 # ------------------------------------------------------------------------------------ output
 
-def _atomic_path(output: str) -> str:
-    from mv3dpose_ros.io.bag import BagError, temp_path_beside
-    try:
-        return temp_path_beside(output)
-    except BagError as exc:
-        raise RenderError(str(exc)) from exc
-
-
-def write_png(image: np.ndarray, output: str) -> str:
-    """Write a picture atomically (a temp file renamed into place)."""
-    tmp = _atomic_path(output)
-    try:
-        if not cv2.imwrite(tmp, image):
-            raise RenderError(f'{output}: OpenCV could not write the picture')
-        os.replace(tmp, output)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return output
-
-
-def write_animation(frames: Sequence[np.ndarray], output: str, fps: float,
-                    max_width: int = 720) -> str:
-    """Write an animated GIF (``.gif``) or a video (``.mp4``/``.avi``) atomically."""
-    if not frames:
-        raise RenderError(f'{output}: no frames to animate')
-    h, w = frames[0].shape[:2]
-    scale = min(1.0, max_width / w)
-    size = (int(w * scale) // 2 * 2, int(h * scale) // 2 * 2)
-    small = [cv2.resize(f, size, interpolation=cv2.INTER_AREA) for f in frames]
-    tmp = _atomic_path(output)
-    try:
-        if output.lower().endswith('.gif'):
-            anim = cv2.Animation()
-            anim.frames = small
-            anim.durations = [max(20, int(round(1000 / fps)))] * len(small)
-            anim.loop_count = 0
-            if not cv2.imwriteanimation(tmp, anim):
-                raise RenderError(f'{output}: OpenCV could not write the GIF')
-        else:
-            fourcc = cv2.VideoWriter_fourcc(*('mp4v' if output.lower().endswith('.mp4')
-                                              else 'MJPG'))
-            writer = cv2.VideoWriter(tmp, fourcc, fps, size)
-            if not writer.isOpened():
-                raise RenderError(f'{output}: OpenCV cannot write this video format')
-            for f in small:
-                writer.write(f)
-            writer.release()
-        os.replace(tmp, output)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return output
-
-
 def render_tracks(tracks: str, output: Optional[str] = None, gif: Optional[str] = None,
                   video: Optional[str] = None, calibration: Optional[str] = None,
                   images: Optional[str] = None, frame: Optional[int] = None,
                   layout: Optional[str] = None, topic: Optional[str] = None, fps: float = 0.0,
                   max_frames: int = 300, title: str = '', quiet: bool = False) -> dict:
     """Render a tracks file or bag; return what was written and which frame the PNG shows."""
-    from tqdm import tqdm
     issues: List[str] = []
     frames = load_frames(tracks, topic, issues)
     if not frames:
         raise RenderError(f'{tracks}: no frames of tracks')
     cameras = None
     if calibration:
-        from mv3dpose_ros.commands.convert import ConvertError, load_cameras
         try:
             cameras = load_cameras(calibration)
-        except ConvertError as exc:
+        except SourceError as exc:
             raise RenderError(str(exc)) from exc
     if images and not cameras:
         raise RenderError('--images needs --calibration to reproject the skeletons')
@@ -554,7 +403,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``mv3dpose render``."""
-    from mv3dpose_ros.io.bag import BagError
     output = args.output
     if not (output or args.gif or args.video):
         output = str(Path(args.tracks.rstrip('/')).with_suffix('.png'))

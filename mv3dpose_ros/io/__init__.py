@@ -12,4 +12,17 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""io package."""
+"""
+Files: bags, datasets, detections, tracks, images and videos; no ROS (rosbags, not rclpy).
+
+- :mod:`.bag`: rosbag2 read and write (MCAP, sqlite3) on ``rosbags``: type store, reader, writer,
+  checks and salvage.
+- :mod:`.media`: image and video files: the accepted extensions, folder listing by frame
+  number, video frames and rate (``SourceError``).
+- :mod:`.cameras`: a rig's inputs: the calibration, one image folder or video per camera matched
+  to its cameras, and the time points that align their frames.
+- :mod:`.openpose`: OpenPose JSON detections, one folder per camera, one file per frame.
+- :mod:`.tracks_jsonl`: tracks as JSON Lines, the output of ``mv3dpose track``.
+- :mod:`.datasets`: ground truth of the public multi-view datasets (Campus, Shelf, Panoptic).
+- :mod:`.foxglove_ws`: a minimal Foxglove WebSocket client that decodes by advertised schema.
+"""

@@ -297,8 +297,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         schema = msgs[0].schema_name if msgs else '-'
         print(f'{topic:40s} {len(msgs):5d} messages  {schema}')
     if args.png:
-        from mv3dpose_ros.commands.render import write_png
-        from mv3dpose_ros.ros.scene import latest_entities, render_scene
+        from mv3dpose_ros.viz.pictures import write_png
+        from mv3dpose_ros.viz.scene import latest_entities, render_scene
         updates = [m.decoded for msgs in got.values() for m in msgs
                    if m.schema_name == 'foxglove.SceneUpdate']
         write_png(render_scene(latest_entities(updates),

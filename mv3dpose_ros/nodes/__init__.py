@@ -12,4 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""nodes package."""
+"""
+The ROS 2 nodes: thin adapters that wire ``core`` and ``pose2d`` to topics and parameters.
+
+- :mod:`.pose2d_node`: one camera's images in, ``Person2DArray`` out (the 2D stage).
+- :mod:`.fusion_node`: N cameras' ``Person2DArray`` in, tracked 3D skeletons out (the live core).
+- :mod:`.bringup`: one pose2d_node per camera plus fusion_node from one rig and one parameter set.
+- :mod:`.image_publisher`: a folder of images or a video file as a free-running camera.
+- :mod:`.foxglove_view`: a live web view of the pipeline over the Foxglove WebSocket protocol.
+- :mod:`.roundtrip_probe`: a publish/echo probe for mv3dpose_msgs over real DDS, for tests.
+- :mod:`.aliases`: deprecated console-script names, kept for one release.
+"""

@@ -59,8 +59,8 @@ from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ms
                                        person2d_array_to_numpy, stamp_to_ns)
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos, sensor_qos
-from mv3dpose_ros.ros.scene import camera_update, skeleton_update
 from mv3dpose_ros.ros.spin import spin_until_shutdown
+from mv3dpose_ros.viz.scene import camera_update, skeleton_update
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

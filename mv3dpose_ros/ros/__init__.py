@@ -12,4 +12,30 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""ros package."""
+"""
+ROS adapters below the nodes: messages, CDR codecs, names, QoS, parameters, diagnostics, TF.
+
+- :mod:`.names`: camera names -> ROS names, and the per-camera topics (``image_topic``,
+  ``persons_topic``, ...) every node, command and launch file uses.
+- :mod:`.cdr`: CDR read and written by hand, shared by the fast message codecs.
+- :mod:`.messages`: core arrays and ``Track`` <-> ``mv3dpose_msgs`` (``Person2DArray``,
+  ``TrackedSkeletonArray``, ``SkeletonInfo``).
+- :mod:`.images`: ``Image``, ``CompressedImage`` and ``CameraInfo`` <-> numpy, without cv_bridge.
+- :mod:`.markers`: RViz ``MarkerArray`` of tracked skeletons.
+- :mod:`.frames`: coordinate frames of the rig and the people as ``geometry_msgs``.
+- :mod:`.tf`: TF broadcasting and lookup for fusion_node where ``tf2_ros`` exists.
+- :mod:`.bag_convert`: files to bags and back (images, OpenPose JSON, tracks), the library of
+  ``mv3dpose convert``.
+- :mod:`.qos`: the package's QoS profiles and incompatible-QoS reporting.
+- :mod:`.params`: parameter declaration with descriptors, from core config dataclasses.
+- :mod:`.fusion_config`: fusion_node's parameters as config dataclasses, and their checks.
+- :mod:`.inputs`: fusion_node's per-camera input statistics and ``Person2DArray`` checks.
+- :mod:`.image_intake`: a raw image subscription a worker thread takes from when it is free.
+- :mod:`.diagnostics`: a small ``/diagnostics`` publisher with diagnostic_updater's keys.
+- :mod:`.fusion_diagnostics`: fusion_node's ``/diagnostics`` statuses.
+- :mod:`.pose2d_diagnostics`: pose2d_node's ``/diagnostics`` statuses, one per camera.
+- :mod:`.log_bridge`: the core's Python ``logging`` forwarded to a node's ROS logger.
+- :mod:`.spin`: spinning a node's executor until the process is asked to stop.
+- :mod:`.memory`: transparent huge pages for the image buffers of image-moving processes.
+- :mod:`.shm`: Fast DDS shared-memory files left behind by processes that are gone.
+"""

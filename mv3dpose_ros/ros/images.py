@@ -306,3 +306,15 @@ def camera_info_from_camera(camera: Any, header: Optional[Header] = None) -> Cam
                       height=int(camera.height), distortion_model='plumb_bob',
                       d=dist.tolist(), k=k.reshape(-1).tolist(),
                       r=np.eye(3).reshape(-1).tolist(), p=p.reshape(-1).tolist())
+
+
+def image_from_message(msg: Any) -> np.ndarray:
+    """
+    Return a BGR (or grey) uint8 array of a ``sensor_msgs/Image``, rclpy's or a rosbags one.
+
+    ``image_to_numpy`` reads it; RGB orders are swapped to BGR, what OpenCV draws and writes.
+    """
+    image, order = image_to_numpy(msg)
+    if order == 'rgb':
+        image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+    return np.ascontiguousarray(image)

@@ -36,6 +36,7 @@ from geometry_msgs.msg import Point, Vector3
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.ros.cdr import CdrWriter, U32
 from mv3dpose_ros.viz.palette import track_rgb
+from mv3dpose_ros.viz.panels import valid_joints
 import numpy as np
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -64,13 +65,6 @@ def _duration(seconds: float) -> Duration:
 
 def _points(xyz: np.ndarray) -> List[Point]:
     return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(xyz, dtype=np.float64).tolist()]
-
-
-def valid_joints(track: Track) -> np.ndarray:
-    """Return the mask ``[J]`` of joints with a state other than MISSING and finite xyz."""
-    xyz = np.asarray(track.joints, dtype=np.float64)
-    states = np.asarray(track.joint_state)
-    return (states != JointState.MISSING) & np.all(np.isfinite(xyz), axis=1)
 
 
 def bone_segments(track: Track, bones: Sequence[Tuple[int, int]],

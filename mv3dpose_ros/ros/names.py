@@ -34,6 +34,11 @@ Pure Python (no rclpy), so offline commands use it too.
 import re
 from typing import Iterable
 
+#: The per-camera topics of a rig (``camera_topic`` patterns), as the nodes and bags name them.
+IMAGE_TOPIC = '/{camera}/image_raw'
+INFO_TOPIC = '/{camera}/camera_info'
+PERSONS_TOPIC = '/{camera}/persons_2d'
+
 _TOKEN = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
 _NAME_TOKEN = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*$')
 
@@ -56,6 +61,21 @@ def camera_namespace(camera: str) -> str:
 def camera_topic(pattern: str, camera: str) -> str:
     """Return ``pattern`` with ``{camera}`` replaced by the ROS name of ``camera``."""
     return pattern.replace('{camera}', camera_namespace(camera))
+
+
+def image_topic(camera: str) -> str:
+    """Return the image topic of ``camera`` (``sensor_msgs/Image``)."""
+    return camera_topic(IMAGE_TOPIC, camera)
+
+
+def info_topic(camera: str) -> str:
+    """Return the ``CameraInfo`` topic of ``camera``."""
+    return camera_topic(INFO_TOPIC, camera)
+
+
+def persons_topic(camera: str) -> str:
+    """Return the ``Person2DArray`` topic of ``camera`` (what its pose2d_node publishes)."""
+    return camera_topic(PERSONS_TOPIC, camera)
 
 
 def topic_problem(name: str) -> str:

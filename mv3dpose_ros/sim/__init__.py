@@ -20,7 +20,8 @@ Synthetic multi-camera scenes with ground truth, for tests, benchmarks and demos
 - :mod:`.people`: walking people with varied bodies (``WalkConfig``, ``BodyConfig``,
   ``simulate_people``);
 - :mod:`.detector`: realistic 2D detector errors (``DetectorNoise``, ``detect``);
-- :mod:`.scene`: all of it together (``Scene``, ``make_scene``).
+- :mod:`.scene`: all of it together (``Scene``, ``make_scene``);
+- :mod:`.export`: a scene written as the files the offline tools read (rig, poses, ground truth).
 """
 
 from mv3dpose_ros.sim.detector import detect, DetectorNoise

@@ -12,10 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-
 """
-Drawing shared by every picture the package makes, below the commands and the nodes.
+Drawing shared by every picture the package makes, below the commands and the nodes; no ROS.
 
-Modules: :mod:`.palette` (one colour per track id, the same in ``mv3dpose render``, RViz
-markers, the Foxglove scene and the pose2d debug image).
+- :mod:`.palette`: one colour per track id, the same in ``mv3dpose render``, RViz markers, the
+  Foxglove scene and the pose2d debug image.
+- :mod:`.panels`: metric orthographic views with a metre grid, skeletons and labels drawn on
+  them, and which joints of a track are drawn (``valid_joints``).
+- :mod:`.pictures`: a picture written as PNG, GIF or video, complete or not at all.
+- :mod:`.scene`: the Foxglove 3D scene of tracks and cameras (``foxglove.messages``), and a
+  picture of a received scene.
 """

@@ -15,7 +15,7 @@
 """
 The Foxglove 3D scene of the tracks and the rig, and a picture of a received scene.
 
-Building (``foxglove.messages``; no rclpy):
+Building (``foxglove.messages``, protobuf; no ROS):
 
 - ``skeleton_update``: one ``SceneEntity`` ``person/<track_id>`` per live track, replacing the
   previous one (same id, same topic): a LINE_LIST of the bones whose two joints are valid
@@ -38,11 +38,10 @@ from foxglove.messages import (Color, Duration, KeyValuePair, LinePrimitive,
                                LinePrimitiveLineType, Point3, Pose, Quaternion, SceneEntity,
                                SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate,
                                SpherePrimitive, TextPrimitive, Timestamp, Vector3)
-from mv3dpose_ros.commands.render import View
 from mv3dpose_ros.core.camera import Camera
 from mv3dpose_ros.core.types import NS_PER_S, Track, TrackState
-from mv3dpose_ros.ros.markers import valid_joints
 from mv3dpose_ros.viz.palette import track_rgb
+from mv3dpose_ros.viz.panels import valid_joints, View
 import numpy as np
 
 _IDENTITY = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
