@@ -29,6 +29,7 @@ from typing import List, Optional
 COMMANDS = {
     'detect': '2D poses of per-camera image folders or videos as OpenPose JSON (offline)',
     'track': 'track people in 3D from per-camera OpenPose JSON folders (offline)',
+    'calibrate': "estimate a rig's extrinsics from the 2D keypoints of the people in it",
     'eval': 'score a tracks file against ground truth (PCP, MPJPE, MOTA)',
     'model': 'fetch and inspect 2D pose models (ONNX)',
     'bag': 'record, play and inspect rosbag2 files',

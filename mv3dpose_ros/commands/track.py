@@ -51,7 +51,9 @@ import logging
 import os
 import sys
 import time
-from typing import Iterator, List, Tuple
+from typing import Iterator, Tuple
+
+from mv3dpose_ros.io.pose_inputs import open_inputs
 
 LOG = logging.getLogger('mv3dpose.track')
 SMOOTH_MODES = ('causal', 'fixed-lag', 'offline', 'none')
@@ -134,53 +136,6 @@ def load_fusion_params(path: str) -> dict:
     except (TypeError, ValueError) as e:
         raise ValueError(f'{path}: {e}') from None
     return dict(params)
-
-
-def open_inputs(args) -> Tuple[dict, object, List[str]]:
-    """Load the calibration and index the pose folders; return (cameras, sequence, notes)."""
-    from mv3dpose_ros.core.calibration import load_calibration
-    from mv3dpose_ros.core.skeleton import get_layout
-    from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
-
-    layout = get_layout(args.layout)
-    cameras = load_calibration(args.calibration, args.calibration_format, cameras=args.cameras)
-    folders, missing = match_camera_folders(args.poses, list(cameras))
-    notes = list(missing)
-    if args.cameras and missing:
-        raise ValueError('; '.join(missing))
-    cameras = {name: cam for name, cam in cameras.items() if name in folders}
-    if len(cameras) < 2:
-        raise ValueError(f'need pose folders of at least two calibrated cameras under '
-                         f'{args.poses}; found {sorted(folders) or "none"}'
-                         + (f' ({"; ".join(missing)})' if missing else ''))
-    seq = OpenPoseSequence({name: folders[name] for name in cameras}, layout.num_joints)
-    if not len(seq):
-        raise ValueError(f'no OpenPose JSON files under {args.poses} '
-                         f'(folders: {", ".join(folders.values())})')
-    _check_layout(seq, layout)
-    return cameras, seq, notes
-
-
-def _check_layout(seq, layout) -> None:
-    """Fail early when the files hold another number of joints than the layout has."""
-    from mv3dpose_ros.core.skeleton import get_layout, LAYOUT_NAMES
-    from mv3dpose_ros.io.openpose import OpenPoseFormatError, read_openpose_file
-
-    for files in seq.files.values():
-        for path in list(files.values())[:20]:
-            try:
-                poses = read_openpose_file(path)
-            except OpenPoseFormatError:
-                continue
-            if len(poses) == 0:
-                continue
-            count = poses.shape[1]
-            if count != layout.num_joints:
-                fits = [n for n in LAYOUT_NAMES if get_layout(n).num_joints == count]
-                raise ValueError(f'{path} has {count} joints per person but layout '
-                                 f'{layout.name!r} has {layout.num_joints}; layouts with '
-                                 f'{count} joints: {", ".join(fits) or "none"}')
-            return
 
 
 @contextlib.contextmanager
