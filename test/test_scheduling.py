@@ -16,10 +16,11 @@
 
 import math
 
-from mv3dpose_ros.pose2d.scheduling import (AUTO_LOSS, AUTO_RATES_HZ, AUTO_UP, AUTO_UP_DWELL_S,
-                                            AUTO_UP_EVERY, AutoInferenceRate, frame_period_ns,
-                                            grid_period_ns, grid_selects, on_new_window,
-                                            RIG_AUTO_RATES_HZ, RigRate, size_ladder)
+from mv3dpose_ros.pose2d.auto_rate import (AUTO_LOSS, AUTO_UP, AUTO_UP_DWELL_S, AUTO_UP_EVERY,
+                                           AutoInferenceRate, RigRate)
+from mv3dpose_ros.pose2d.scheduling import (AUTO_RATES_HZ, frame_period_ns, grid_period_ns,
+                                            grid_selects, on_new_window, RIG_AUTO_RATES_HZ,
+                                            size_ladder)
 import numpy as np
 import pytest
 

@@ -21,4 +21,11 @@
   (``keypoints [P, 17, 3]`` x, y, confidence in original pixels, ``boxes [P, 4]``,
   ``scores [P]``) for the YOLO-pose and MoveNet MultiPose families.
 - ``ops``: letterbox and its inverse, numpy NMS. ``draw``: debug drawing.
+- ``config``: ``pose2d_node``'s parameters as dataclasses (``Pose2DConfig``, ``ModelConfig``).
+- ``intake``: ``ImageMailbox`` (the newest image, what became of the others) and the
+  ``InferenceThread`` that takes from it.
+- ``scheduling``: the grid arithmetic of ``inference_rate_hz`` (windows, frame period, doze,
+  size ladder); ``auto_rate``: auto mode's choice (``AutoInferenceRate``), the rig's rates
+  (``RigRate``) and the rate in use (``GridRate``).
+- ``sizing``: ``EstimatorCache``, the input size in use and the others, each opened once.
 """
