@@ -179,18 +179,15 @@ def test_no_import_cycles_between_modules():
 @pytest.mark.parametrize('package', sorted(ROS_FREE))
 def test_the_algorithm_and_the_2d_logic_import_no_ros(package):
     found = []
-    for name in sorted(os.listdir(os.path.join(PACKAGE, package))):
-        if name.endswith('.py'):
-            found += _ros_imports(os.path.join(PACKAGE, package, name),
-                                  ROS_FREE[package] == 'module level')
+    for module, path in _modules():
+        if _package_of(module) == package:
+            found += _ros_imports(path, ROS_FREE[package] == 'module level')
     assert not found, '\n'.join(found)
 
 
 def test_the_ros_free_packages_load_without_rclpy():
     """Importing every module of them loads no rclpy (nor any message package)."""
-    modules = [f'mv3dpose_ros.{package}.{name[:-3]}' for package in sorted(ROS_FREE)
-               for name in sorted(os.listdir(os.path.join(PACKAGE, package)))
-               if name.endswith('.py')]
+    modules = [m for m, _ in _modules() if _package_of(m) in ROS_FREE]
     code = ('import importlib, sys\n'
             f'for m in {modules!r}: importlib.import_module(m)\n'
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'rclpy'"

@@ -22,6 +22,7 @@ command imports another except ``demo``, which runs the others.
 
 - :mod:`.detect`: 2D poses of per-camera image folders or videos as OpenPose JSON (offline).
 - :mod:`.track`: 3D tracks from per-camera OpenPose JSON folders (offline).
+- :mod:`.calibrate`: a rig's extrinsics from the 2D keypoints of the people in it.
 - :mod:`.eval`: score a tracks file against ground truth (PCP, MPJPE, MOTA).
 - :mod:`.model`: fetch, list, locate and inspect the 2D pose models.
 - :mod:`.bag`: record, play and inspect rosbag2 files without ``ros2 bag``.

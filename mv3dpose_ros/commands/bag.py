@@ -35,7 +35,9 @@ recover salvages interrupted recordings (``.NAME.partial-PID`` of dead processes
 import argparse
 import importlib
 import json
+from pathlib import Path
 import re
+import shutil
 import signal
 import sys
 import time
@@ -46,6 +48,7 @@ from mv3dpose_ros.io.bag import partial_dirs
 from mv3dpose_ros.io.bag import salvage, STORAGES, verify_bag
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
+from tqdm import tqdm
 
 # Topics that ``record`` without topic names leaves out (ros2 bag record -a does the same for
 # the hidden ones; /clock would feed a replayed clock back into itself).
@@ -159,7 +162,6 @@ class _StopFlag:
 
 
 def _progress(total: Optional[int], desc: str, unit: str = 'msg', disable: Optional[bool] = None):
-    from tqdm import tqdm
     # disable=None: tqdm shows the bar only on a terminal, so logs and tests stay clean
     return tqdm(total=total, desc=desc, unit=unit, disable=disable, leave=False,
                 file=sys.stderr, dynamic_ncols=True)
@@ -535,8 +537,6 @@ def recover(path: str, output: Optional[str] = None, overwrite: bool = False,
     ``output`` (default ``NAME``; with several folders ``NAME.recovered-PID``). The partial
     folder is removed afterwards unless ``keep``.
     """
-    import shutil
-    from pathlib import Path
     src = Path(path.rstrip('/'))
     match = re.match(r'^\.(.+)\.partial-(\d+)$', src.name)
     if match and src.is_dir():

@@ -35,6 +35,12 @@ import math
 import sys
 from typing import Dict, List, Optional
 
+from mv3dpose_ros.core.camera import CalibrationError
+from mv3dpose_ros.core.files import atomic_path
+from mv3dpose_ros.core.types import TrackState
+from mv3dpose_ros.eval.sequence import evaluate_run, load_ground_truth, read_hypotheses
+from mv3dpose_ros.io.datasets import DatasetError
+
 
 def parse_frames(text: str) -> List[int]:
     """Parse '350-470,650-750,800' into a sorted list of frame numbers (ranges inclusive)."""
@@ -96,8 +102,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _states(text: str):
-    from mv3dpose_ros.core.types import TrackState
-
     names = [s.strip().lower() for s in text.split(',') if s.strip()]
     known = {s.name.lower(): s for s in TrackState if s != TrackState.DELETED}
     bad = [n for n in names if n not in known]
@@ -109,10 +113,6 @@ def _states(text: str):
 
 def run(args) -> int:
     """Load both files, score, print; return the exit code."""
-    from mv3dpose_ros.core.camera import CalibrationError
-    from mv3dpose_ros.eval.sequence import evaluate_run, load_ground_truth, read_hypotheses
-    from mv3dpose_ros.io.datasets import DatasetError
-
     issues: List[str] = []
     stamps: Dict[int, float] = {}
     try:
@@ -143,7 +143,6 @@ def run(args) -> int:
           f'truth {args.gt} ({gt.layout})')
     print(report.text())
     if args.json:
-        from mv3dpose_ros.core.files import atomic_path
         out: Optional[dict] = report.as_dict()
         try:
             with atomic_path(args.json) as tmp, open(tmp, 'w', encoding='utf-8') as f:

@@ -32,6 +32,8 @@ import json
 import sys
 
 from mv3dpose_ros.pose2d import models
+from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
+from mv3dpose_ros.pose2d.fetch import fetch, fetch_int8, FetchError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -71,7 +73,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _fetch(args) -> int:
-    from mv3dpose_ros.pose2d.fetch import fetch, FetchError
     spec = models.get_spec(args.model)
     try:
         sizes = [models.parse_size(s, spec) for s in args.size]
@@ -89,7 +90,6 @@ def _fetch(args) -> int:
     try:
         paths = fetch(spec.name, sizes, directory=args.cache_dir, force=args.force)
         if args.int8:
-            from mv3dpose_ros.pose2d.fetch import fetch_int8
             paths += fetch_int8(spec.name, sizes, args.calibration_images,
                                 directory=args.cache_dir, force=args.force)
     except (FetchError, OSError) as exc:
@@ -151,7 +151,6 @@ def _path(args) -> int:
 
 
 def _info(args) -> int:
-    from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
     try:
         est = open_estimator(args.path, threads=1)
     except ModelError as exc:

@@ -22,6 +22,8 @@ Files: bags, datasets, detections, tracks, images and videos; no ROS (rosbags, n
 - :mod:`.cameras`: a rig's inputs: the calibration, one image folder or video per camera matched
   to its cameras, and the time points that align their frames.
 - :mod:`.openpose`: OpenPose JSON detections, one folder per camera, one file per frame.
+- :mod:`.pose_inputs`: the inputs of the commands that read per-camera OpenPose JSON folders
+  with a calibration (``mv3dpose track``, ``mv3dpose calibrate``).
 - :mod:`.tracks_jsonl`: tracks as JSON Lines, the output of ``mv3dpose track``.
 - :mod:`.datasets`: ground truth of the public multi-view datasets (Campus, Shelf, Panoptic).
 - :mod:`.foxglove_ws`: a minimal Foxglove WebSocket client that decodes by advertised schema.

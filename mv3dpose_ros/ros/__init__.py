@@ -31,6 +31,7 @@ ROS adapters below the nodes: messages, CDR codecs, names, QoS, parameters, diag
 - :mod:`.fusion_config`: fusion_node's parameters as config dataclasses, and their checks.
 - :mod:`.inputs`: fusion_node's per-camera input statistics and ``Person2DArray`` checks.
 - :mod:`.image_intake`: a raw image subscription a worker thread takes from when it is free.
+- :mod:`.rig_rate`: the rig-rate handshake of pose2d_node's auto mode.
 - :mod:`.diagnostics`: a small ``/diagnostics`` publisher with diagnostic_updater's keys.
 - :mod:`.fusion_diagnostics`: fusion_node's ``/diagnostics`` statuses.
 - :mod:`.pose2d_diagnostics`: pose2d_node's ``/diagnostics`` statuses, one per camera.

@@ -20,6 +20,7 @@ Drawing shared by every picture the package makes, below the commands and the no
 - :mod:`.panels`: metric orthographic views with a metre grid, skeletons and labels drawn on
   them, and which joints of a track are drawn (``valid_joints``).
 - :mod:`.pictures`: a picture written as PNG, GIF or video, complete or not at all.
+- :mod:`.rig`: a picture of a calibrated rig (cameras, the people it was calibrated from).
 - :mod:`.scene`: the Foxglove 3D scene of tracks and cameras (``foxglove.messages``), and a
   picture of a received scene.
 """
