@@ -108,9 +108,8 @@ def _wait(rec: Recording, predicate, timeout: float, procs) -> bool:
     return False
 
 
-@pytest.fixture(scope='module')
-def multi_host_rig(shared_data, model, tmp_path_factory):
-    """Run the scenario once for the module; return what the planner and the wire recorded."""
+def _videos(shared_data: str) -> str:
+    """Return the video folder; skip with the reason where namespaces or videos are missing."""
     ok, why = netns.available()
     if not ok:
         pytest.skip(f'cannot create network namespaces: {why}')
@@ -120,29 +119,50 @@ def multi_host_rig(shared_data, model, tmp_path_factory):
     if missing:
         pytest.skip(f'Pose2Sim single-person videos missing: {missing}')
     netns.sweep_stale()
-    tmp = tmp_path_factory.mktemp('multi_host')
-    env = dict(os.environ, RIG=RIG, ROS_DOMAIN_ID=os.environ.get(
+    return videos
+
+
+def _env() -> Dict[str, str]:
+    """Return the environment every host shares: the rig file and one ROS_DOMAIN_ID."""
+    return dict(os.environ, RIG=RIG, ROS_DOMAIN_ID=os.environ.get(
         'ROS_DOMAIN_ID', str(random.randint(100, 199))))
+
+
+def _start(net: netns.Network, tmp, env: Dict[str, str], host: str, script: str,
+           name: str) -> NodeProcess:
+    return NodeProcess(net.shell(host, script), tmp / f'{name}.log', name=name, cwd=ROOT,
+                       shell=True, env=env)
+
+
+def _start_rig(net: netns.Network, tmp, env_of, hosts: Dict[str, List[str]], videos: str,
+               record: str) -> Dict[str, NodeProcess]:
+    """Start the planner (its block, then the probe), the fusion host and the camera hosts."""
+    procs = {'planner': _start(net, tmp, env_of('planner'), 'planner', block('planner-host') + (
+        f'exec python -m mv3dpose_ros.testing.remote_probe {shlex.quote(record)} '
+        '--tracks --diagnostics\n'), 'planner')}
+    procs['fusion'] = _start(net, tmp, env_of('fusion'), 'fusion', block('fusion-host'), 'fusion')
+    for host, cams in hosts.items():
+        procs[host] = _start(net, tmp, dict(env_of(host), CAMERAS=' '.join(cams)), host,
+                             'source env.sh\nexport ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET\n'
+                             + _publishers(cams, videos) + block('camera-host'), host)
+    return procs
+
+
+@pytest.fixture(scope='module')
+def multi_host_rig(shared_data, model, tmp_path_factory):
+    """Run the scenario once for the module; return what the planner and the wire recorded."""
+    videos = _videos(shared_data)
+    tmp = tmp_path_factory.mktemp('multi_host')
+    env = _env()
     out: Dict[str, object] = {'folder': tmp, 'events': {}}
     ev = out['events']
     procs: Dict[str, NodeProcess] = {}
     record = str(tmp / 'planner.jsonl')
     rec = Recording(record)
     with netns.Network(['cam_a', 'cam_b', 'fusion', 'planner']) as net:
-        def start(host: str, script: str, name: str, **extra) -> NodeProcess:
-            return NodeProcess(net.shell(host, script), tmp / f'{name}.log', name=name,
-                               cwd=ROOT, shell=True, env=dict(env, **extra))
-
         try:
             ev['start'] = time.time_ns()
-            procs['planner'] = start('planner', block('planner-host') + (
-                f'exec python -m mv3dpose_ros.testing.remote_probe {shlex.quote(record)} '
-                '--tracks --diagnostics\n'), 'planner')
-            procs['fusion'] = start('fusion', block('fusion-host'), 'fusion')
-            for host, cams in HOSTS.items():
-                procs[host] = start(host, 'source env.sh\nexport ROS_AUTOMATIC_DISCOVERY_RANGE='
-                                    'SUBNET\n' + _publishers(cams, videos) + block('camera-host'),
-                                    host, CAMERAS=' '.join(cams))
+            procs.update(_start_rig(net, tmp, lambda host: env, HOSTS, videos, record))
             running = list(procs.values())
             # 1. Every camera in the tracks at the planner.
             out['ready'] = _wait(rec, lambda: _cameras_of(rec.tracks[-20:]) >= set(CAMERAS),
@@ -167,7 +187,8 @@ def multi_host_rig(shared_data, model, tmp_path_factory):
             # 3. The fusion host restarted.
             out['fusion_code'] = procs['fusion'].stop_group()
             ev['fusion_stopped'] = time.time_ns()
-            procs['fusion'] = start('fusion', block('fusion-host'), 'fusion_restarted')
+            procs['fusion'] = _start(net, tmp, env, 'fusion', block('fusion-host'),
+                                     'fusion_restarted')
             running = list(procs.values())
             out['restarted'] = _wait(
                 rec, lambda: _cameras_of(rec.tracks_between(ev['fusion_stopped'])) >= set(
@@ -290,3 +311,45 @@ def test_multi_host_camera_with_a_late_clock_is_reported(multi_host_rig):
               for cam in HOSTS['cam_a'] for d in rec.status(f'fusion_node: {cam} input',
                                                             first + 10 * NS, ev['down'])]
     assert all(abs(v) <= 5.0 for v in others), others
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_multi_host_static_peers_without_multicast(shared_data, model, tmp_path):
+    """
+    A network that carries no multicast: the same blocks find each other by ROS_STATIC_PEERS.
+
+    Camera host A (cam_01, cam_02), the fusion host and the planner, each with
+    ``ROS_STATIC_PEERS`` naming the others' addresses, as docs/multi-host.md says; a fourth
+    host without it (SUBNET only, as the blocks alone) is the control: it finds nobody.
+    """
+    videos = _videos(shared_data)
+    env = _env()
+    record, control = str(tmp_path / 'planner.jsonl'), str(tmp_path / 'control.jsonl')
+    rec, ctl = Recording(record), Recording(control)
+    hosts = {'cam_a': HOSTS['cam_a']}
+    procs: Dict[str, NodeProcess] = {}
+    with netns.Network(['cam_a', 'fusion', 'planner', 'control'], multicast=False) as net:
+        def env_of(host: str) -> Dict[str, str]:
+            peers = [a for h, a in net.addresses.items() if h not in (host, 'control')]
+            return dict(env, ROS_STATIC_PEERS=';'.join(peers))
+
+        try:
+            procs.update(_start_rig(net, tmp_path, env_of, hosts, videos, record))
+            procs['control'] = _start(net, tmp_path, env, 'control', block('planner-host') + (
+                f'exec python -m mv3dpose_ros.testing.remote_probe {shlex.quote(control)} '
+                '--tracks\n'), 'control')
+            ok = _wait(rec, lambda: _cameras_of(rec.tracks[-20:]) >= set(hosts['cam_a']),
+                       READY_TIMEOUT_S, list(procs.values()))
+            t_ok = time.time_ns()
+            if ok:
+                time.sleep(3.0)
+        finally:
+            stop_all(list(procs.values()))
+            logs = {n: p.log()[-2500:] for n, p in procs.items()}
+    rec.poll()
+    ctl.poll()
+    assert ok, ('no tracks of cam_01 and cam_02 at the planner by static peers', logs)
+    assert rec.tracks_between(t_ok)                 # and they keep coming
+    assert not ctl.tracks, 'a host without static peers found the rig: multicast got through'

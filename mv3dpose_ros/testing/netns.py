@@ -89,10 +89,13 @@ class Network:
     Namespaced hosts on one bridge: ``Network(['cam_a', 'fusion'])``, then ``run`` / ``cmd``.
 
     Every host gets ``eth0`` at ``10.213.0.<i + 1>/24`` plus a route for multicast (DDS
-    discovery) on it, and ``lo``; nothing else.
+    discovery) on it, and ``lo``; nothing else. ``multicast=False`` makes a switch that
+    forwards no multicast between hosts (the bridge snoops IGMP, forgets every membership at
+    once and floods no unknown group), as networks that block it: multicast still works
+    within a host, and DDS finds other hosts only by unicast (``ROS_STATIC_PEERS``).
     """
 
-    def __init__(self, hosts: Sequence[str]) -> None:
+    def __init__(self, hosts: Sequence[str], multicast: bool = True) -> None:
         """Create the bridge and one namespace per host; undo all of it on any failure."""
         self.tag = f'{os.getpid()}n{next(_counter)}'
         self.bridge = f'{BRIDGE_PREFIX}{self.tag}'
@@ -100,9 +103,13 @@ class Network:
         self.veths: Dict[str, str] = {}           # host -> bridge end of its veth
         self.addresses: Dict[str, str] = {}
         self._links: List[str] = []
+        self.multicast = multicast
         try:
             _ip('link', 'add', self.bridge, 'type', 'bridge')
             self._links.append(self.bridge)
+            if not multicast:          # snooping, and every group membership forgotten at once
+                _ip('link', 'set', self.bridge, 'type', 'bridge', 'mcast_snooping', '1',
+                    'mcast_querier', '0', 'mcast_membership_interval', '1')
             _ip('link', 'set', self.bridge, 'up')
             for i, host in enumerate(hosts):
                 self._add_host(i, host)
@@ -123,11 +130,15 @@ class Network:
         _ip('link', 'set', outer, 'up')
         addr = f'{SUBNET}.{i + 1}'
         self.addresses[host] = addr
-        for args in (['link', 'set', inner, 'name', 'eth0'],
-                     ['addr', 'add', f'{addr}/24', 'dev', 'eth0'],
-                     ['link', 'set', 'eth0', 'up'], ['link', 'set', 'lo', 'up'],
-                     ['route', 'add', '224.0.0.0/4', 'dev', 'eth0']):
+        steps = [['link', 'set', inner, 'name', 'eth0'],
+                 ['addr', 'add', f'{addr}/24', 'dev', 'eth0'],
+                 ['link', 'set', 'eth0', 'up'], ['link', 'set', 'lo', 'up'],
+                 ['route', 'add', '224.0.0.0/4', 'dev', 'eth0']]
+        for args in steps:
             _ip('-n', ns, *args)
+        if not self.multicast:         # the switch floods no multicast to this port
+            subprocess.run(['bridge', 'link', 'set', 'dev', outer, 'mcast_flood', 'off'],
+                           capture_output=True, text=True, check=True)
 
     # ------------------------------------------------------------------ processes
     def cmd(self, host: str, argv: Sequence[str]) -> List[str]:
