@@ -20,8 +20,6 @@ behaviour: the parameter table the config declares, what the mailbox counts, the
 thread's loop, the rate in use with a rig, and the estimator cache on crafted ONNX files.
 """
 
-import hashlib
-import json
 import os
 import threading
 import time
@@ -35,8 +33,8 @@ from mv3dpose_ros.pose2d.intake import (header_stamp_ns, ImageMailbox, Inference
 from mv3dpose_ros.pose2d.scheduling import AUTO_RATES_HZ, doze_s, missed_windows
 from mv3dpose_ros.pose2d.sizing import EstimatorCache
 import numpy as np
-from onnx_min import make_constant_model
 import pytest
+from test_pose2d_node import _fake_cache   # crafted yolo11n-pose files in a cache
 
 NS = 1_000_000_000
 MS = 1_000_000
@@ -238,24 +236,8 @@ def test_grid_rate_adapt_says_what_auto_mode_changed():
 
 
 # -- sizes ----------------------------------------------------------------------------------------
-def _cache(tmp_path, sizes):
-    """Return a cache of crafted 'yolo11n-pose' fp32 files of ``sizes``."""
-    cache = tmp_path / 'cache'
-    cache.mkdir()
-    out = np.zeros((1, 56, 8400), np.float32)
-    for hw in sizes:
-        data = make_constant_model([('images', np.float32, [1, 3, *hw])], {'output0': out},
-                                   {'task': 'pose'})
-        path = models.model_file('yolo11n-pose', hw, str(cache))
-        open(path, 'wb').write(data)
-        open(models.sidecar_file(path), 'w').write(json.dumps(
-            {'name': 'yolo11n-pose', 'family': 'yolo-pose', 'input_size': list(hw),
-             'precision': 'fp32', 'onnx_sha256': hashlib.sha256(data).hexdigest()}))
-    return str(cache)
-
-
 def test_estimator_cache_fits_the_first_image_and_opens_each_size_once(tmp_path):
-    cache = _cache(tmp_path, [(640, 640), (384, 640), (288, 512), (192, 320)])
+    cache = _fake_cache(tmp_path, [(640, 640), (384, 640), (288, 512), (192, 320)])
     opened, ladders = [], []
 
     def open_file(path, hw):
@@ -292,7 +274,7 @@ def test_estimator_cache_fits_the_first_image_and_opens_each_size_once(tmp_path)
 
 
 def test_estimator_cache_names_the_size_that_would_fit_better(tmp_path):
-    cache = _cache(tmp_path, [(640, 640)])
+    cache = _fake_cache(tmp_path, [(640, 640)])
     sizes = EstimatorCache(ModelConfig(cache_dir=cache, threads=1),
                            lambda path, hw: open_estimator(path, threads=1, input_size=hw),
                            lambda: True, lambda ladder: None)
