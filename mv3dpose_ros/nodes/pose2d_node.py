@@ -313,7 +313,8 @@ class Pose2DNode(LifecycleNode):
             self._say('warning', f'inference_nice {self._param("inference_nice")} not applied: '
                       f'{exc}')
         elif self.context.ok():             # else Ctrl-C shut the context down: no error
-            self.failed += what == 'failed'
+            if what == 'failed':
+                self.failed += 1
             text = 'inference failed' if what == 'failed' else 'taking an image failed'
             self._complain(what, f'{text}: {exc!r}')
 
