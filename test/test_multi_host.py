@@ -32,7 +32,9 @@ arrive. One run, in order:
 
 Proven: the above, and that images never leave their host (each camera host sent less over
 the measured 10 s than one raw image is). Printed: rates, bytes/s per host, capture -> tracks
-latency at the planner, how long discovery and the restart took.
+latency at the planner, how long discovery and the restart took. The clock-offset report
+(cam_04) is checked on the same run. A second, smaller rig runs the same blocks on a switch
+that forwards no multicast, with ``ROS_STATIC_PEERS``. bench/multi_host.py measures the wire.
 """
 
 import collections
