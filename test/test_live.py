@@ -244,3 +244,22 @@ def test_a_sustained_stamp_jump_back_resets_through_the_synchroniser(pose2sim):
              all(t.state == TrackState.DELETED for t in p.tracks)]
     assert tombs and tombs[0].stamp_ns == T0 + 19 * PERIOD_NS
     assert live.counts['sets'] > 20                # the stream goes on from the new stamps
+
+
+def test_a_camera_stamped_20_ms_late_at_10_hz_is_named_with_its_offset(pose2sim):
+    """A host clock 20 ms ahead: that camera's arrival delays stand apart from the others'."""
+    cameras, frames = pose2sim
+    live, notes = make_live(cameras)
+    period = NS_PER_S // 10
+    late = list(cameras)[2]
+    for k, (_, views) in enumerate(frames):
+        capture = T0 + k * period
+        for j, (cam, poses) in enumerate(views.items()):
+            now = capture + 40_000_000 + j * 1_000_000 + (k * 7919 % 11) * 1_000_000
+            live.add(cam, capture + (20_000_000 if cam == late else 0), poses, now, now)
+    assert set(live.clock_suspects) == {late}
+    assert abs(live.clock_suspects[late] - 0.020) < 0.005
+    assert any(f'camera {late}' in line and 'ms later than the rest of the rig' in line
+               for line in notes.lines), notes.lines
+    others = [c for c in cameras if c != late]
+    assert all(abs(live.stamp_offsets.offsets_s()[c]) < 0.005 for c in others)

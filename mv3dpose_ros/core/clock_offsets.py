@@ -31,9 +31,8 @@ With two cameras the offset is relative to the other one: either may be the one 
 from collections import deque
 from typing import Deque, Dict, List, Optional, Tuple
 
-import numpy as np
-
 from mv3dpose_ros.core.types import NS_PER_S
+import numpy as np
 
 
 class StampOffsets:
@@ -94,6 +93,6 @@ def describe_offset(camera: str, offset_s: float, period_s: float,
     return (f'camera {camera}{where}: stamps {abs(offset_s) * 1e3:.1f} ms {direction} than the '
             f'rest of the rig ({abs(offset_s) / period_s:.0%} of its {period_s * 1e3:.0f} ms '
             f'frame period), from arrival delays: views of different instants are fused as '
-            f'one set. Check that host\'s clock (chrony: `chronyc tracking`; PTP: linuxptp) '
-            f'or the driver\'s stamping; a pipeline that much '
+            'one set. Check that host clock (chrony: `chronyc tracking`; PTP: linuxptp) '
+            'or the stamping of the driver; a pipeline that much '
             f'{"faster" if offset_s > 0 else "slower"} than the others reads the same.')

@@ -114,6 +114,10 @@ class SyncConfig:
     jump_confirm: int = 3            # consecutive outliers per camera, on >= 2 cameras, that
     #                                  make a sustained jump (reset; e.g. a bag loop)
     stats_window: int = 100          # used messages kept per camera for offset / jitter
+    offset_warn_fraction: float = 0.15  # warn when a camera's stamps stand this share of its
+    #                                  frame period (and >= 5 ms) apart from the rest of the
+    #                                  rig's, judged from arrival delays (a host clock that is
+    #                                  off); 0 = off (also under sim time)
     stream_ahead_check: bool = True  # judge stamps ahead of the stream time on the arrival
     #                                  clock; off under sim time, where a paced or fast replay
     #                                  does not advance stamps at the arrival clock's rate (the
@@ -137,6 +141,9 @@ class SyncConfig:
             raise ValueError(f'sync jump_confirm must be >= 1, got {self.jump_confirm}')
         if self.stats_window < 1:
             raise ValueError(f'sync stats_window must be >= 1, got {self.stats_window}')
+        if not (math.isfinite(self.offset_warn_fraction) and self.offset_warn_fraction >= 0.0):
+            raise ValueError(f'sync offset_warn_fraction must be >= 0, got '
+                             f'{self.offset_warn_fraction}')
 
 
 @dataclass

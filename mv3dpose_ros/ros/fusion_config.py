@@ -199,6 +199,7 @@ def check_setup(p: FusionNodeParams, sim_time: bool, search_dirs: Sequence[str] 
         if sim_time:
             # A replay's stamps follow /clock, not the arrival clock: judge them there.
             p.sync.stream_ahead_check = False
+            p.sync.offset_warn_fraction = 0.0      # arrival delays of a replay say nothing
         p.fusion.validate()
     except (TypeError, ValueError) as exc:
         raise ConfigError(f'parameters: {exc}') from exc

@@ -60,6 +60,7 @@ class FusionStatus:
     def inputs(self, now: int, expected_rate_hz: float, silent_warn_ns: int) -> List[Any]:
         """Return one status per camera input (steady clock ``now``)."""
         out = []
+        offsets = self.live.stamp_offsets.offsets_s()
         for cam in self.camera_ids:
             st = self.cams[cam]
             ss = self.live.sync.stats[cam]
@@ -82,7 +83,8 @@ class FusionStatus:
                       'skip notices (persons_2d/skipped)': st.skips,
                       'skip notices rejected': st.skips_rejected,
                       'offset mean (ms)': ss.offset_mean_s * 1e3,
-                      'offset jitter (ms)': ss.offset_jitter_s * 1e3}
+                      'offset jitter (ms)': ss.offset_jitter_s * 1e3,
+                      'stamp offset (ms)': offsets.get(cam, math.nan) * 1e3}
             for reason, n in sorted(ss.unmatched.items()):
                 values[f'dropped by sync: {reason}'] = n
             for reason, n in sorted(st.rejected.items()):
@@ -98,6 +100,10 @@ class FusionStatus:
                 level, message = ERROR, st.calibration_problem
             elif level_value(t_level) > level_value(OK):
                 level, message = t_level, t_msg
+            elif cam in self.live.clock_suspects:
+                level = WARN
+                message = (f'stamps {self.live.clock_suspects[cam] * 1e3:+.1f} ms off the rest '
+                           'of the rig (host clock? chrony / PTP)')
             elif level_value(f_level) > level_value(OK) and expected_rate_hz > 0:
                 level, message = f_level, f_msg
             elif ss.rate_hz < 0.75 * expected:
