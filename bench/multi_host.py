@@ -262,7 +262,8 @@ def main() -> int:
     parser.add_argument('--measure', type=float, default=15.0, help='seconds per figure')
     parser.add_argument('--idle-warmup', type=float, default=20.0,
                         help='seconds from start to the idle measurement (nodes up, no image)')
-    parser.add_argument('--caps', nargs='*', default=['1mbit', '256kbit', '128kbit', '64kbit', '16kbit'],
+    parser.add_argument('--caps', nargs='*',
+                        default=['1mbit', '256kbit', '128kbit', '64kbit', '16kbit'],
                         help='tc tbf rates for camera host B')
     parser.add_argument('--skip-one-host', action='store_true')
     args = parser.parse_args()
