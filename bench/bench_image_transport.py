@@ -23,8 +23,8 @@ mv3dpose_bringup apply), and print both. Each side also reports its CPU time per
 Both run with the malloc setting the image nodes use (transparent huge pages for image-sized
 buffers, ``mv3dpose_ros/ros/memory.py``). ``--buffers`` repeats the shared-memory pair with
 glibc's defaults (a fresh 4 KiB-page ``mmap`` per 6 MB buffer) and with 6 MB buffers kept in
-the heap (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``; see README, "HD images and
-the CPU", for why the nodes do not do that), to show what the page faults cost:
+the heap (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``; see docs/rig.md, "HD images
+and the CPU", for why the nodes do not do that), to show what the page faults cost:
 
     python bench/bench_image_transport.py [--count 50] [--rate 10] [--reliable] [--buffers]
 """

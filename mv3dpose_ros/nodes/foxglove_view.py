@@ -20,7 +20,7 @@ images, and serves them with ``foxglove-sdk`` on ``ws://127.0.0.1:8765`` (loopba
 so Foxglove (desktop, or the web app) connects with no ROS install:
 
 - ``/mv3dpose/scene`` (``foxglove.SceneUpdate``): one skeleton entity per track, coloured by id,
-  with a label; ended tracks deleted (``ros/scene.py``);
+  with a label; ended tracks deleted (``viz/scene.py``);
 - ``/mv3dpose/cameras`` (``foxglove.SceneUpdate``): the camera frustums of ``rig_config``,
   re-sent every ``cameras_period_s`` so a client that connects later gets them;
 - the tracks topic and each camera's detections topic, forwarded byte for byte as ROS 2 channels

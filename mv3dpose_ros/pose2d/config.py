@@ -62,7 +62,8 @@ class ModelConfig:
     #                                   gives each of N cameras cores / N)
     precision: str = 'auto'             # auto | fp32 | int8: variant of the registered model; auto
     #                                   = int8 on the CPU where fetched (make setup builds it;
-    #                                   15-20 % less time, see README for its accuracy), else fp32
+    #                                   15-20 % less time, accuracy in docs/models.md), else
+    #                                   fp32
     providers: str = 'auto'             # onnxruntime execution providers: auto (TensorRT where its
     #                                   libraries load, CUDA, OpenVINO, CPU: the first available)
     #                                   or a comma-separated list of tensorrt, cuda, openvino, cpu;

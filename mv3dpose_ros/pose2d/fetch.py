@@ -304,7 +304,7 @@ def mirrored_views(image: np.ndarray) -> List[np.ndarray]:
 
     Whole frames only: crops that zoom the people in (tried: 0.6 and 0.8 of each side) widen
     the min/max activation ranges beyond what a rig's full frames show, and made a phantom
-    4th person at 640x640 on the Panoptic views where these did not (README).
+    4th person at 640x640 on the Panoptic views where these did not (docs/models.md).
     """
     return [image, np.ascontiguousarray(image[:, ::-1])]
 

@@ -217,7 +217,7 @@ def pick_precision(name: str, size: Tuple[int, int], directory: Optional[str] = 
     Return the precision to load ``size`` in: ``precision`` itself unless it is 'auto'.
 
     'auto' (``model.precision``'s default) takes int8 where its file is fetched and the model
-    runs on the CPU (15-20 % less time, keypoints a few px off fp32: README), else fp32.
+    runs on the CPU (15-20 % less time, keypoints a few px off fp32: docs/models.md), else fp32.
     """
     if precision != 'auto':
         return precision
