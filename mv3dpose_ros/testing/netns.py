@@ -41,7 +41,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 PREFIX = 'mv3dns'                     # namespaces: mv3dns-<pid>-<n>-<host>
 BRIDGE_PREFIX = 'mv3b'                # bridges: mv3b<pid>n<n>; veths: mv3v<pid>n<n>h<i>
-SUBNET = '10.213.0'                   # hosts get .1, .2, ... /24 (no route beyond it)
+SUBNET = '10.213'                     # 10.213.<network>.<host + 1>/24, no route beyond it
 _counter = itertools.count()
 
 
@@ -88,11 +88,13 @@ class Network:
     """
     Namespaced hosts on one bridge: ``Network(['cam_a', 'fusion'])``, then ``run`` / ``cmd``.
 
-    Every host gets ``eth0`` at ``10.213.0.<i + 1>/24`` plus a route for multicast (DDS
-    discovery) on it, and ``lo``; nothing else. ``multicast=False`` makes a switch that
-    forwards no multicast between hosts (the bridge snoops IGMP, forgets every membership at
-    once and floods no unknown group), as networks that block it: multicast still works
-    within a host, and DDS finds other hosts only by unicast (``ROS_STATIC_PEERS``).
+    Every host gets ``eth0`` at ``10.213.<n>.<i + 1>/24`` plus a route for multicast (DDS
+    discovery) on it, and ``lo``; nothing else. ``n`` differs between the networks of runs in
+    parallel: Fast DDS tells hosts apart by host name and addresses, and all the namespaces
+    share the host name and /dev/shm. ``multicast=False`` makes a switch that forwards no
+    multicast between hosts (the bridge snoops IGMP, forgets every membership at once and
+    floods no unknown group), as networks that block it: multicast still works within a host,
+    and DDS finds other hosts only by unicast (``ROS_STATIC_PEERS``).
     """
 
     def __init__(self, hosts: Sequence[str], multicast: bool = True) -> None:
@@ -104,6 +106,7 @@ class Network:
         self.addresses: Dict[str, str] = {}
         self._links: List[str] = []
         self.multicast = multicast
+        self._octet = (os.getpid() * 31 + int(self.tag.split('n')[1])) % 250 + 1
         try:
             _ip('link', 'add', self.bridge, 'type', 'bridge')
             self._links.append(self.bridge)
@@ -128,7 +131,7 @@ class Network:
         _ip('link', 'set', inner, 'netns', ns)
         _ip('link', 'set', outer, 'master', self.bridge)
         _ip('link', 'set', outer, 'up')
-        addr = f'{SUBNET}.{i + 1}'
+        addr = f'{SUBNET}.{self._octet}.{i + 1}'
         self.addresses[host] = addr
         steps = [['link', 'set', inner, 'name', 'eth0'],
                  ['addr', 'add', f'{addr}/24', 'dev', 'eth0'],
