@@ -54,16 +54,13 @@ from mv3dpose_ros.pose2d.draw import draw_people
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, make_status, OK, RateLimitedLog, WARN
 from mv3dpose_ros.ros.images import decode_image_bytes, ImageError, message_to_numpy
-from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, msg_to_tracks,
                                        person2d_array_to_numpy, stamp_to_ns)
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos, sensor_qos
-from mv3dpose_ros.ros.spin import spin_until_shutdown
+from mv3dpose_ros.ros.spin import run_cli_node
 from mv3dpose_ros.viz.scene import camera_update, skeleton_update
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -311,27 +308,9 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
 
 def main(args: Optional[List[str]] = None) -> int:
     """Entry point of the ``mv3dpose_foxglove_view`` console script."""
-    if args is None:
-        reexec_with_hugepages()         # 6 MB images with 2 MiB page faults (ros/memory.py)
-    argv = sys.argv if args is None else args
-    rclpy.init(args=argv)
-    node = None
-    try:
-        overrides = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
-        node = FoxgloveView(parameter_overrides=overrides)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        spin_until_shutdown(executor)
-    except (ValueError, RuntimeError) as exc:
-        print(f'mv3dpose_foxglove_view: error: {exc}', file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_cli_node('mv3dpose_foxglove_view',
+                        lambda overrides: FoxgloveView(parameter_overrides=overrides),
+                        _parse_cli, args, errors=(ValueError, RuntimeError))
 
 
 if __name__ == '__main__':

@@ -77,15 +77,12 @@ from typing import Any, Dict, List, Optional, Tuple
 import cv2
 from mv3dpose_ros.io.media import IMAGE_EXTENSIONS
 from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy_to_compressed
-from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.names import camera_namespace
 from mv3dpose_ros.ros.qos import describe, sensor_qos
-from mv3dpose_ros.ros.spin import spin_until_shutdown
+from mv3dpose_ros.ros.spin import run_cli_node, spin_until_shutdown
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
@@ -569,36 +566,23 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
     return [Parameter(k, value=v) for k, v in vars(args).items() if v is not None]
 
 
+def _publish_until_done(node: ImagePublisher, executor: Any) -> None:
+    """Spin while the publisher thread runs, then let its last messages go out."""
+    worker = threading.Thread(target=node.run, name='publisher', daemon=True)
+    worker.start()
+    try:
+        spin_until_shutdown(executor, node.done.is_set)
+    finally:
+        node.done.set()
+        worker.join(timeout=5.0)
+    spin_until_shutdown(executor, spins=5)
+
+
 def main(args: Optional[List[str]] = None) -> int:
     """Publish until the source ends (or forever with ``--loop``)."""
-    if args is None:
-        reexec_with_hugepages()         # 6 MB images with 2 MiB page faults (ros/memory.py)
-    argv = sys.argv if args is None else args
-    rclpy.init(args=argv)
-    node = None
-    try:
-        overrides = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
-        node = ImagePublisher(parameter_overrides=overrides)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        worker = threading.Thread(target=node.run, name='publisher', daemon=True)
-        worker.start()
-        try:
-            spin_until_shutdown(executor, node.done.is_set)
-        finally:
-            node.done.set()
-            worker.join(timeout=5.0)
-        spin_until_shutdown(executor, spins=5)     # let the last messages go out
-    except ValueError as exc:
-        print(f'image_publisher: error: {exc}', file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_cli_node('image_publisher',
+                        lambda overrides: ImagePublisher(parameter_overrides=overrides),
+                        _parse_cli, args, spin=_publish_until_done)
 
 
 if __name__ == '__main__':
