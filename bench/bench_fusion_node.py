@@ -67,6 +67,7 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K, FusionStatusNames as N
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim.people import WalkConfig
@@ -295,7 +296,7 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
         diags.clear()
         end = time.monotonic() + 3.0
         while time.monotonic() < end and not any(
-                s.name.endswith('tracking') for a in diags for s in a.status):
+                s.name.endswith(N.TRACKING) for a in diags for s in a.status):
             ex.spin_once(timeout_sec=0.05)
     finally:
         proc.interrupt(10)
@@ -303,22 +304,22 @@ def run(feed: Feed, seconds: float, rate: float, markers: bool = False,
     values = {}
     for arr in diags:
         for s in arr.status:
-            if s.name.endswith('tracking') or s.name.endswith('synchronizer'):
+            if s.name.endswith(N.TRACKING) or s.name.endswith('synchronizer'):
                 values.update({kv.key: kv.value for kv in s.values})
     lat = np.array(e2e[5:]) if len(e2e) > 10 else np.array(e2e)
     tracks = [len(deserialize_message(d, TrackedSkeletonArray).skeletons) for d in outputs[-30:]]
     cpu_s = cpu1 - cpu0
     return {'cams': len(feed.cameras), 'people': feed.people, 'frames': frames,
             'received': len(e2e), 'sets_per_s': sent_outputs / (wall1 - wall0),
-            'node_median_ms': values.get('latency median (ms)', 'n/a'),
-            'node_p95_ms': values.get('latency p95 (ms)', 'n/a'),
-            'proc_median_ms': values.get('processing median (ms)', 'n/a'),
-            'proc_p95_ms': values.get('processing p95 (ms)', 'n/a'),
+            'node_median_ms': values.get(K.LATENCY_MEDIAN_MS, 'n/a'),
+            'node_p95_ms': values.get(K.LATENCY_P95_MS, 'n/a'),
+            'proc_median_ms': values.get(K.PROCESSING_MEDIAN_MS, 'n/a'),
+            'proc_p95_ms': values.get(K.PROCESSING_P95_MS, 'n/a'),
             'e2e_median_ms': percentile(lat, 50), 'e2e_p95_ms': percentile(lat, 95),
             'cpu_pct': 100.0 * cpu_s / (wall1 - wall0),
             'cpu_ms_per_set': 1e3 * cpu_s / max(1, len(e2e)),
             'markers': marker_count[0],
-            'sets': values.get('sets emitted', 'n/a'), 'partial': values.get('partial sets'),
+            'sets': values.get(K.SETS_EMITTED, 'n/a'), 'partial': values.get(K.PARTIAL_SETS),
             'mean_tracks': float(np.mean(tracks)) if tracks else 0.0}
 
 

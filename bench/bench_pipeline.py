@@ -86,6 +86,9 @@ import tempfile
 import time
 from typing import Dict, List, Sequence, Tuple
 
+from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K, Pose2DKeys as P
+from mv3dpose_ros.core.types import NS_PER_S as NS
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo')
 CALIBRATION = os.path.join(DATA, 'camera_parameters.json')
@@ -94,7 +97,6 @@ CAMERAS = ('00_03', '00_06', '00_12', '00_13', '00_23')
 FRAMES = ('00004500', '00005514', '00006859', '00009348', '00013007')
 STAMP = struct.Struct('<iI')     # header.stamp, right after the 4-byte CDR encapsulation
 STAGES = ('transport', 'wait', 'decode', 'pre', 'inference', 'post', 'publish')
-NS = 1_000_000_000
 # The options of each way to play the cameras: (in-process default, --publishers default).
 DEFAULTS = {'cameras': ([1, 2, 4], [4]), 'seconds': (20.0, 60.0), 'warmup': (5.0, 10.0),
             'hold': (2.0, 0.0)}
@@ -117,16 +119,16 @@ def _load_frames(cameras: List[str]) -> Dict[str, list]:
 def _counts(diags: Dict[str, Dict[str, str]]) -> Dict[str, int]:
     """Sum the nodes' running counters in the latest diagnostics (``diags``: name -> values)."""
     pose = [v for k, v in diags.items() if k.endswith(' inference')]
-    pipeline = [v for v in diags.values() if 'sets emitted' in v]
+    pipeline = [v for v in diags.values() if K.SETS_EMITTED in v]
 
     def fusion(key: str) -> int:
         return int(float(pipeline[0].get(key, 0))) if pipeline else 0
 
     return {
-        'received': sum(int(d.get('Images received', 0)) for d in pose),
-        'dropped_pose2d': sum(int(d.get('Dropped before inference (newer image arrived)', 0))
+        'received': sum(int(d.get(P.IMAGES_RECEIVED, 0)) for d in pose),
+        'dropped_pose2d': sum(int(d.get(P.DROPPED_NEWER, 0))
                               for d in pose),
-        'dropped_sync': sum(int(d.get('dropped by sync', 0)) for d in diags.values()),
+        'dropped_sync': sum(int(d.get(K.DROPPED_BY_SYNC, 0)) for d in diags.values()),
         'sets emitted': fusion('sets emitted'), 'partial sets': fusion('partial sets'),
         'skip decided': fusion('incomplete sets decided on skip notices'),
     }
@@ -274,16 +276,16 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         feeder.close()
         outputs.close()
     pose = [v for k, v in diags.items() if k.endswith(' inference')]
-    stage = {s: median([float(d.get(f'Stage {s} median (ms)', 'nan')) for d in pose])
+    stage = {s: median([float(d.get(P.STAGE_MEDIAN_MS.format(s), 'nan')) for d in pose])
              for s in STAGES}
-    fusion = [v for k, v in diags.items() if 'processing median (ms)' in v]
+    fusion = [v for k, v in diags.items() if K.PROCESSING_MEDIAN_MS in v]
     stage['fusion'] = median([float(d['processing median (ms)']) for d in fusion])
     if len(cameras) > 1:         # capture stamp -> ~/tracks published, inside fusion_node
         inside = (median([float(d['latency median (ms)']) for d in fusion]),
                   median([float(d['latency p95 (ms)']) for d in fusion]))
     else:                        # capture stamp -> persons_2d published, inside pose2d_node
-        inside = (median([float(d.get('Capture to publish median (ms)', 'nan')) for d in pose]),
-                  median([float(d.get('Capture to publish p95 (ms)', 'nan')) for d in pose]))
+        inside = (median([float(d.get(P.CAPTURE_TO_PUBLISH_MEDIAN_MS, 'nan')) for d in pose]),
+                  median([float(d.get(P.CAPTURE_TO_PUBLISH_P95_MS, 'nan')) for d in pose]))
     whole = _counts(diags)
     window_counts = {k: v - counts_at_start.get(k, 0) for k, v in whole.items()}
     per_point = {}
@@ -300,8 +302,8 @@ def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider
         'whole': whole, 'window': window_counts, 'seconds': window,
         'people': {p: (sum(1 for n in v if n >= 3), len(v), min(v)) for p, v in
                    sorted(per_point.items())},
-        'threads': [d.get('Intra-op threads', '?') for d in pose][:1],
-        'input': sorted({d.get('Input size (HxW)', '?') + ' ' + d.get('Precision', '')
+        'threads': [d.get(P.THREADS, '?') for d in pose][:1],
+        'input': sorted({d.get(P.INPUT_SIZE, '?') + ' ' + d.get(P.PRECISION, '')
                          for d in pose}),
     }
 

@@ -43,6 +43,7 @@ import sys
 import time
 from typing import Dict, List
 
+from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K
 from mv3dpose_ros.testing import netns
 from mv3dpose_ros.testing.processes import NodeProcess, stop_all
 from mv3dpose_ros.testing.remote_probe import Recording
@@ -124,7 +125,7 @@ def latency(messages: List[dict]) -> str:
 def received(rec: Recording, cam: str, until_ns: int) -> int:
     """Return fusion_node's 'received' count of ``cam`` in the last status before ``until``."""
     st = rec.status(f'fusion_node: {cam} input', 0, until_ns)
-    return int(st[-1]['values']['received']) if st else 0
+    return int(st[-1]['values'][K.RECEIVED]) if st else 0
 
 
 def kbps(nbytes: float, seconds: float) -> str:

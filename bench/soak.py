@@ -40,6 +40,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.diagnostic_keys import FusionStatusNames as N
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array, stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim import make_scene
@@ -147,8 +148,8 @@ def main() -> int:
             f += 1
             if t >= next_print:
                 next_print += args.every
-                sync = diag.get('synchronizer', (0, '', {}))[2]
-                clk = diag.get('clock', (0, 'n/a', {}))
+                sync = diag.get(N.SYNCHRONIZER, (0, '', {}))[2]
+                clk = diag.get(N.CLOCK, (0, 'n/a', {}))
                 recent = lat[-int(args.every * args.rate):] or [float('nan')]
                 print(f'{t:6.0f} | {rss_mb(proc.pid):6.1f} | {sets[0]:5d} | '
                       f'{percentile(recent, 50):7.1f} / {percentile(recent, 95):7.1f} | '
@@ -157,7 +158,7 @@ def main() -> int:
                       f'{sync.get("lost upstream (stamp gaps)", "?"):>4} | '
                       f'{"OK" if clk[0] == 0 else "ERROR"} {clk[1][:60]}', flush=True)
         probe.spin_for(3)
-        sync = diag.get('synchronizer', (0, '', {}))[2]
+        sync = diag.get(N.SYNCHRONIZER, (0, '', {}))[2]
         print('synchronizer:', ', '.join(f'{k}={v}' for k, v in sync.items()))
     finally:
         proc.interrupt(10)

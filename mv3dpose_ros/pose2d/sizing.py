@@ -24,6 +24,7 @@ first time.
 
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from mv3dpose_ros.core.diagnostic_keys import Pose2DKeys as K
 from mv3dpose_ros.pose2d.config import ModelConfig
 from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError
 from mv3dpose_ros.pose2d.models import (fetched_sizes, fit_size, get_spec, ModelNotFound,
@@ -170,10 +171,10 @@ class EstimatorCache:
         if est is None:
             return {}
         return {'Model': est.path, 'Model family': est.family,
-                'Input size (HxW)': f'{est.input_size[0]}x{est.input_size[1]}',
+                K.INPUT_SIZE: f'{est.input_size[0]}x{est.input_size[1]}',
                 'Input size steps (auto)': ', '.join(size_tag(z) for z in self.ladder)
-                or 'fixed', 'Precision': est.precision, 'Execution provider': est.provider,
-                'Intra-op threads': int(self.config.threads), 'Weights licence': est.licence}
+                or 'fixed', K.PRECISION: est.precision, 'Execution provider': est.provider,
+                K.THREADS: int(self.config.threads), 'Weights licence': est.licence}
 
 
 def describe(est: Any, threads: int, ready_ms: Optional[float] = None) -> str:

@@ -27,6 +27,7 @@ from collections import Counter
 import math
 from typing import Any, Callable, Dict, List, Sequence, Tuple
 
+from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K, FusionStatusNames as N
 from mv3dpose_ros.core.live import LiveFusion
 from mv3dpose_ros.core.types import NS_PER_S, TrackState
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
@@ -75,8 +76,8 @@ class FusionStatus:
                       'expected rate (Hz)': expected,
                       'lost upstream (stamp gaps)': ss.lost,
                       'skipped by pose2d (announced gaps)': ss.skipped,
-                      'received': st.received, 'accepted': st.accepted,
-                      'used in sets': ss.used, 'dropped by sync': ss.dropped,
+                      K.RECEIVED: st.received, 'accepted': st.accepted,
+                      'used in sets': ss.used, K.DROPPED_BY_SYNC: ss.dropped,
                       'late': ss.late, 'late, used (tracks updated at its stamp)':
                           st.late_used, 'outlier stamps': ss.outliers,
                       'missing from sets': ss.missing,
@@ -84,7 +85,7 @@ class FusionStatus:
                       'skip notices rejected': st.skips_rejected,
                       'offset mean (ms)': ss.offset_mean_s * 1e3,
                       'offset jitter (ms)': ss.offset_jitter_s * 1e3,
-                      'stamp offset (ms)': offsets.get(cam, math.nan) * 1e3}
+                      K.STAMP_OFFSET_MS: offsets.get(cam, math.nan) * 1e3}
             for reason, n in sorted(ss.unmatched.items()):
                 values[f'dropped by sync: {reason}'] = n
             for reason, n in sorted(st.rejected.items()):
@@ -118,7 +119,7 @@ class FusionStatus:
                 level = WARN
                 message = (f'{new_lost} frames lost upstream (gaps in the stamps: '
                            'publisher, network or DDS queue)')
-            out.append(make_status(self.name(f'{cam} input'), level, message,
+            out.append(make_status(self.name(cam + N.INPUT_SUFFIX), level, message,
                                    hardware_id=cam, values=values))
         return out
 
@@ -139,7 +140,7 @@ class FusionStatus:
             'sets decided early (queue full)': s.overflow_decisions}
         new = {k: v - self._drops_reported.get(k, 0) for k, v in drops.items()}
         self._drops_reported = drops
-        values = {'sets emitted': s.sets_emitted, 'partial sets': s.partial_sets,
+        values = {K.SETS_EMITTED: s.sets_emitted, K.PARTIAL_SETS: s.partial_sets,
                   'incomplete sets decided on skip notices': s.decisions['skipped (announced)'],
                   'pivots dropped (too few views)': s.pivots_dropped,
                   'pending messages': s.pending(), 'held outlier messages': s.held_outliers,
@@ -155,7 +156,7 @@ class FusionStatus:
         message = f'{s.sets_emitted} sets, {s.partial_sets} partial'
         if changed:
             message += '; this cycle: ' + ', '.join(f'{v} {k}' for k, v in changed.items())
-        sync_status = make_status(self.name('synchronizer'), level, message, values=values)
+        sync_status = make_status(self.name(N.SYNCHRONIZER), level, message, values=values)
         tracks = self.live.last_tracks
         states = Counter(TrackState(t.state).name.lower() for t in tracks)
         f_level, f_msg, rate = self.output_rate.sample(now)
@@ -164,10 +165,10 @@ class FusionStatus:
                   'coasting tracks': states.get('coasting', 0),
                   'tentative tracks': states.get('tentative', 0),
                   'output frequency (Hz)': rate['Actual frequency (Hz)'],
-                  'latency median (ms)': self.latency.percentile(50) * 1e3,
-                  'latency p95 (ms)': self.latency.percentile(95) * 1e3,
-                  'processing median (ms)': self.processing.percentile(50) * 1e3,
-                  'processing p95 (ms)': self.processing.percentile(95) * 1e3,
+                  K.LATENCY_MEDIAN_MS: self.latency.percentile(50) * 1e3,
+                  K.LATENCY_P95_MS: self.latency.percentile(95) * 1e3,
+                  K.PROCESSING_MEDIAN_MS: self.processing.percentile(50) * 1e3,
+                  K.PROCESSING_P95_MS: self.processing.percentile(95) * 1e3,
                   'processing max (ms)': self.processing.percentile(100) * 1e3,
                   'fusion errors': counts['fusion_errors']}
         fusion = self.live.fusion
@@ -183,7 +184,7 @@ class FusionStatus:
             level, message = WARN, 'waiting for calibration (CameraInfo)'
         elif counts['fusion_errors']:
             level, message = WARN, f'{counts["fusion_errors"]} fusion errors'
-        track_status = make_status(self.name('tracking'), level, message, values=values)
+        track_status = make_status(self.name(N.TRACKING), level, message, values=values)
         problems = {c: cams[c].calibration_problem for c in ids if cams[c].calibration_problem}
         calib = make_status(
             self.name('calibration'), ERROR if problems else OK,
@@ -200,7 +201,7 @@ class FusionStatus:
         stalled = (steady - self._clock_seen[1]) / NS_PER_S
         values = {'use_sim_time': sim, 'node clock (s)': node_now / NS_PER_S,
                   'unchanged for (s, steady clock)': stalled}
-        name = self.name('clock')
+        name = self.name(N.CLOCK)
         if not sim:
             return make_status(name, OK, 'system clock', values=values)
         if node_now == 0:

@@ -26,6 +26,7 @@ import threading
 import time
 from typing import Any, Dict, Optional, Tuple
 
+from mv3dpose_ros.core.diagnostic_keys import Pose2DKeys as K
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
                                           TimestampStats, WARN, WindowStats)
 
@@ -105,18 +106,18 @@ class Pose2DStatus:
             ts_level, ts_text, ts_values = self.stamps.sample()
             infer50, infer95 = self.infer_ms.percentile(50), self.infer_ms.percentile(95)
             path50 = self.path_ms.percentile(50)
-            stage50 = {f'Stage {stage} median (ms)': st.percentile(50)
+            stage50 = {K.STAGE_MEDIAN_MS.format(stage): st.percentile(50)
                        for stage, st in self.stage_ms.items()}
-            stage50['Capture to publish median (ms)'] = self.capture_ms.percentile(50)
-            stage50['Capture to publish p95 (ms)'] = self.capture_ms.percentile(95)
+            stage50[K.CAPTURE_TO_PUBLISH_MEDIAN_MS] = self.capture_ms.percentile(50)
+            stage50[K.CAPTURE_TO_PUBLISH_P95_MS] = self.capture_ms.percentile(95)
         received, dropped = mailbox.received, mailbox.dropped
         values = {'Input frequency (Hz)': in_values['Actual frequency (Hz)'], **values,
                   **ts_values, 'Inference latency median (ms)': infer50,
                   'Inference latency p95 (ms)': infer95, 'Whole path median (ms)': path50,
-                  **stage50, 'Images received': received,
+                  **stage50, K.IMAGES_RECEIVED: received,
                   'Images taken from DDS (copied)': mailbox.taken,
                   'Images processed': self.processed,
-                  'Dropped before inference (newer image arrived)': dropped,
+                  K.DROPPED_NEWER: dropped,
                   'Skipped (inference_rate_hz grid)': mailbox.skipped,
                   'Skips announced (persons_2d/skipped)': self.skips_announced, **rate_values,
                   'Rejected (encoding/size)': self.rejected_encoding,
