@@ -32,12 +32,14 @@ arrive. One run, in order:
 
 Proven: the above, and that images never leave their host (each camera host sent less over
 the measured 10 s than one raw image is). Printed: rates, bytes/s per host, capture -> tracks
-latency at the planner, how long discovery and the restart took. The clock-offset report
-(cam_04) is checked on the same run. A second, smaller rig runs the same blocks on a switch
+latency at the planner, how long discovery and the restart took. The clock-offset report is
+checked on the same run (xfail where the arrival-delay estimate is not there on 2 loaded
+cores: cam_04 named at 20 +- 5 ms within 10 s, and no right clock called off). A second, smaller rig runs the same blocks on a switch
 that forwards no multicast, with ``ROS_STATIC_PEERS``. bench/multi_host.py measures the wire.
 """
 
 import collections
+import math
 import os
 import random
 import shlex
@@ -242,6 +244,14 @@ def _report(run: dict) -> str:
     return '\n'.join(lines)
 
 
+def _number(text) -> float:
+    """Return a diagnostics value as a float (NaN for 'n/a' or none)."""
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return math.nan
+
+
 def _tail(run: dict) -> str:
     return '\n'.join(f'--- {n}:\n{log[-2500:]}' for n, log in run['logs'].items())
 
@@ -293,26 +303,40 @@ def test_multi_host_rig_as_typed(multi_host_rig):
 @pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.timeout(420)
-@pytest.mark.xfail(strict=False, reason='clock-offset wiring pending')
+@pytest.mark.xfail(strict=False, reason='the offset comes from arrival delays: on 2 loaded cores '
+                   'with 4 pose2d_node competing, cam_04 read 20 +- 5 ms within 10 s in 3 of 4 '
+                   'runs, 1.5-9.5 ms in the other')
 def test_multi_host_camera_with_a_late_clock_is_reported(multi_host_rig):
     """cam_04 stamped 20 ms late at 10 Hz: fusion_node names it with its offset within 10 s."""
     run = multi_host_rig
-    rec, ev = run['rec'], run['events']
+    rec = run['rec']
     assert run['ready'], _report(run)
     first = min(m['t'] for m in rec.tracks if OFFSET_CAMERA in _cameras_of([m]))
     log = run['fusion_log']
-    assert f'camera {OFFSET_CAMERA}' in log and 'ms later than the rest of the rig' in log, (
-        log[-3000:])
-    reported = [d for d in rec.status(f'fusion_node: {OFFSET_CAMERA} input', first,
-                                      first + 10 * NS)
-                if abs(float(d['values'].get('stamp offset (ms)', 'nan')) - OFFSET_S * 1e3)
-                <= 5.0]
-    assert reported, [d['values'].get('stamp offset (ms)')
-                      for d in rec.status(f'fusion_node: {OFFSET_CAMERA} input')][-20:]
-    others = [float(d['values'].get('stamp offset (ms)', 'nan'))
-              for cam in HOSTS['cam_a'] for d in rec.status(f'fusion_node: {cam} input',
-                                                            first + 10 * NS, ev['down'])]
-    assert all(abs(v) <= 5.0 for v in others), others
+    assert f'camera {OFFSET_CAMERA}: stamps ' in log and 'ms later than the rest of the rig' in (
+        log), log[-3000:]
+    mine = rec.status(f'fusion_node: {OFFSET_CAMERA} input', first, first + 10 * NS)
+    reported = [d for d in mine if d['level'] == 1 and abs(
+        _number(d['values'].get('stamp offset (ms)')) - OFFSET_S * 1e3) <= 5.0]
+    assert reported, [(d['level'], d['message'], d['values'].get('stamp offset (ms)'))
+                      for d in mine]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.timeout(420)
+@pytest.mark.xfail(strict=False, reason='the offset comes from arrival delays, which cannot tell '
+                   'a clock from a slower pipeline: on 2 loaded cores the cameras whose clock is '
+                   'right read 15-105 ms off in the first 10 s')
+def test_multi_host_cameras_with_a_right_clock_are_not_called_off(multi_host_rig):
+    """cam_01 .. cam_03 are stamped right: no clock-offset warning names them."""
+    run = multi_host_rig
+    rec, ev = run['rec'], run['events']
+    assert run['ready'], _report(run)
+    wrong = [(d['name'], d['message']) for cam in CAMERAS if cam != OFFSET_CAMERA
+             for d in rec.status(f'fusion_node: {cam} input', ev['start'], ev['down'])
+             if 'rest of the rig' in d['message']]
+    assert not wrong, wrong
 
 
 @pytest.mark.ros
