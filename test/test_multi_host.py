@@ -34,8 +34,9 @@ Proven: the above, and that images never leave their host (each camera host sent
 the measured 10 s than one raw image is). Printed: rates, bytes/s per host, capture -> tracks
 latency at the planner, how long discovery and the restart took. The clock-offset report is
 checked on the same run (xfail where the arrival-delay estimate is not there on 2 loaded
-cores: cam_04 named at 20 +- 5 ms within 10 s, and no right clock called off). A second, smaller rig runs the same blocks on a switch
-that forwards no multicast, with ``ROS_STATIC_PEERS``. bench/multi_host.py measures the wire.
+cores: cam_04 named at 20 +- 5 ms within 10 s, and no right clock called off). A second,
+smaller rig runs the same blocks on a switch that forwards no multicast, with
+``ROS_STATIC_PEERS``. bench/multi_host.py measures the wire.
 """
 
 import collections
