@@ -196,3 +196,23 @@ def test_the_ros_free_packages_load_without_rclpy():
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == '[]', out.stdout
+
+
+def test_every_module_is_in_its_package_map():
+    """Each package's docstring names each of its modules (``:mod:`.name```): a real map."""
+    missing = []
+    for package in sorted(os.listdir(PACKAGE)):
+        path = os.path.join(PACKAGE, package)
+        init = os.path.join(path, '__init__.py')
+        if not os.path.isfile(init):
+            continue
+        doc = ast.get_docstring(ast.parse(open(init).read())) or ''
+        for name in sorted(os.listdir(path)):
+            module = name[:-3] if name.endswith('.py') else name
+            if module == '__init__' or not (
+                    name.endswith('.py') or os.path.isfile(os.path.join(path, name,
+                                                                        '__init__.py'))):
+                continue
+            if f':mod:`.{module}`' not in doc:
+                missing.append(f'mv3dpose_ros/{package}/__init__.py does not name {module}')
+    assert not missing, '\n'.join(missing)

@@ -33,6 +33,7 @@ it free of ROS and at the bottom of the import floors.
 - :mod:`.live`: the live fusion loop (synchroniser, fusion, publication, idle steps, coasting).
 - :mod:`.hindsight`: batch-only settling of tracks with knowledge of the future.
 - :mod:`.clock_offsets`: each camera's stamp offset against the rig, from arrival delays.
+- :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys nodes write and benches read.
 - :mod:`.selfcal`: extrinsic calibration of a rig from the keypoints of people walking in it.
 - :mod:`.bundle`: bundle adjustment of camera extrinsics and 3D points.
 """

@@ -15,17 +15,17 @@
 """
 2D multi-person pose estimation with onnxruntime on the CPU (no rclpy here).
 
-- ``models``: registry of fetchable models (pinned PyPI sources, sha256, licences) and cache.
-- ``fetch``: builds a registered model's ONNX once (``mv3dpose model fetch``).
-- ``estimator``: ``open_estimator(path)`` -> ``PoseEstimator.infer(image) -> Detections``
+- :mod:`.models`: registry of fetchable models (pinned PyPI sources, sha256, licences) and cache.
+- :mod:`.fetch`: builds a registered model's ONNX once (``mv3dpose model fetch``).
+- :mod:`.estimator`: ``open_estimator(path)`` -> ``PoseEstimator.infer(image) -> Detections``
   (``keypoints [P, 17, 3]`` x, y, confidence in original pixels, ``boxes [P, 4]``,
   ``scores [P]``) for the YOLO-pose and MoveNet MultiPose families.
-- ``ops``: letterbox and its inverse, numpy NMS. ``draw``: debug drawing.
-- ``config``: ``pose2d_node``'s parameters as dataclasses (``Pose2DConfig``, ``ModelConfig``).
-- ``intake``: ``ImageMailbox`` (the newest image, what became of the others) and the
+- :mod:`.ops`: letterbox and its inverse, numpy NMS. :mod:`.draw`: debug drawing.
+- :mod:`.config`: ``pose2d_node``'s parameters as dataclasses (``Pose2DConfig``, ``ModelConfig``).
+- :mod:`.intake`: ``ImageMailbox`` (the newest image, what became of the others) and the
   ``InferenceThread`` that takes from it.
-- ``scheduling``: the grid arithmetic of ``inference_rate_hz`` (windows, frame period, doze,
-  size ladder); ``auto_rate``: auto mode's choice (``AutoInferenceRate``), the rig's rates
+- :mod:`.scheduling`: the grid arithmetic of ``inference_rate_hz`` (windows, frame period, doze,
+  size ladder); :mod:`.auto_rate`: auto mode's choice (``AutoInferenceRate``), the rig's rates
   (``RigRate``) and the rate in use (``GridRate``).
-- ``sizing``: ``EstimatorCache``, the input size in use and the others, each opened once.
+- :mod:`.sizing`: ``EstimatorCache``, the input size in use and the others, each opened once.
 """

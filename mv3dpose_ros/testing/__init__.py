@@ -26,5 +26,8 @@ package imports it.
   publishes per camera (``Probe``, ``Received``), and the latest ``/diagnostics`` values;
 - :mod:`.rig`: the probe of a live rig (persons_2d, tracks, diagnostics) and its analysis
   (``RigProbe``, ``time_points``, ``analyse``, ``drop_table``, ``publisher_command``);
-- :mod:`.stats`: percentiles and medians of measured figures (NaN when there are none).
+- :mod:`.stats`: percentiles and medians of measured figures (NaN when there are none);
+- :mod:`.netns`: hosts as Linux network namespaces on one bridge (links, caps, counters);
+- :mod:`.remote_probe`: a probe process on another host writing what it receives as JSON
+  lines.
 """
