@@ -61,3 +61,24 @@ def test_too_few_messages_say_nothing_and_a_reset_forgets():
     assert len(mon.suspects(PERIOD, 0.15, 0.005)) == 2     # two cameras: either may be off
     mon.reset()
     assert mon.offsets_s() == {}
+
+
+def test_a_slower_pipeline_is_not_a_clock_when_the_set_phases_say_otherwise():
+    """Delays 25 ms longer but stamps in phase with the rig: a loaded host, not its clock."""
+    mon = feed({'a': 0, 'b': 0, 'c': -25, 'd': 0}, phases=False)
+    assert [c for c, _ in mon.suspects(PERIOD, 0.15, 0.005)] == ['c']      # delays alone
+    in_phase = {'a': 0.0, 'b': 0.0, 'c': 0.0, 'd': 0.0}
+    assert mon.suspects(PERIOD, 0.15, 0.005, in_phase) == []
+    shifted = {'a': -0.005, 'b': -0.005, 'c': -0.030, 'd': -0.005}            # set means
+    (cam, off), = mon.suspects(PERIOD, 0.15, 0.005, shifted)
+    assert cam == 'c' and abs(off + 0.025) < 0.004
+
+
+def test_a_camera_gone_quiet_is_not_judged_on_old_delays():
+    mon = feed({'a': 0, 'b': 0, 'c': 30})
+    t = max(q[-1][0] for q in mon._delays.values())
+    for k in range(150):                       # 15 s more of a and b only
+        for cam in ('a', 'b'):
+            arrival = t + (k + 1) * int(PERIOD * NS)
+            mon.observe(cam, arrival - 45_000_000, arrival)
+    assert set(mon.offsets_s()) == {'a', 'b'}

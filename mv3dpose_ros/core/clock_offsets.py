@@ -23,9 +23,13 @@ and inference pipeline plus the clock offset. Pipelines of one rig differ little
 fastest messages, so a camera's low delay quantile standing apart from the other cameras' is
 its clock offset (positive: its stamps are later than the rig's, i.e. its clock runs ahead).
 
-It cannot tell a clock offset from a pipeline that is that much faster or slower (a camera
-host with a slower CPU reads as stamped early), so the warning says both and what to check.
-With two cameras the offset is relative to the other one: either may be the one that is off.
+Delays alone cannot tell a clock offset from a pipeline that much faster or slower (a
+loaded camera host reads as stamped early), so a camera is named only when the phase of its
+stamps within the synchronised sets says the same: a clock that is off moves both by the same
+amount, a slow pipeline only the delays. Triggered cameras (one capture instant per set) show
+such a phase; free-running cameras have phases of their own and an offset there goes unnamed
+(it is one more phase for the sets' slop). With two cameras the offset is relative to the
+other one: either may be the one that is off.
 """
 
 from collections import deque
@@ -44,11 +48,13 @@ class StampOffsets:
         self.min_samples = int(min_samples)
         self.quantile = float(quantile)
         self._delays: Dict[str, Deque[Tuple[int, int]]] = {}     # camera -> (arrival, delay)
+        self._latest_ns = 0                                       # newest arrival of any
 
     def observe(self, camera: str, stamp_ns: int, arrival_ns: int) -> None:
         """Record one message: ``arrival_ns`` on the fusion host's clock, as the stamps'."""
         q = self._delays.setdefault(camera, deque())
         q.append((arrival_ns, arrival_ns - stamp_ns))
+        self._latest_ns = max(self._latest_ns, arrival_ns)
         while q and q[0][0] < arrival_ns - self.window_ns:
             q.popleft()
 
@@ -58,31 +64,43 @@ class StampOffsets:
 
     def _low_delay_s(self, camera: str) -> Optional[float]:
         q = self._delays.get(camera)
-        if not q or len(q) < self.min_samples:
-            return None
+        if not q or len(q) < self.min_samples or q[-1][0] < self._latest_ns - self.window_ns:
+            return None                 # too few, or a camera gone quiet: nothing current
         return float(np.quantile([d for _, d in q], self.quantile)) / NS_PER_S
 
     def offsets_s(self) -> Dict[str, float]:
         """Return each camera's offset [s] against the median of the other cameras'."""
         low = {c: d for c in self._delays if (d := self._low_delay_s(c)) is not None}
-        out: Dict[str, float] = {}
-        for cam, delay in low.items():
-            others = [d for c, d in low.items() if c != cam]
-            if others:
-                out[cam] = float(np.median(others)) - delay
-        return out
+        return {c: -v for c, v in relative(low).items()}
 
-    def suspects(self, period_s: float, fraction: float, floor_s: float
-                 ) -> List[Tuple[str, float]]:
-        """Return ``(camera, offset_s)`` beyond ``max(fraction x period, floor)``, worst first."""
+    def suspects(self, period_s: float, fraction: float, floor_s: float,
+                 phases_s: Optional[Dict[str, float]] = None) -> List[Tuple[str, float]]:
+        """
+        Return ``(camera, offset_s)`` beyond ``max(fraction x period, floor)``, worst first.
+
+        ``phases_s``: each camera's mean stamp offset within its sets (the synchroniser's);
+        when given, a camera is named only where its phase against the other cameras' agrees
+        with its delay offset (within a third of it, at least ``floor_s``).
+        """
         offsets = self.offsets_s()
         limit = max(fraction * period_s, floor_s)
         found = [(c, o) for c, o in offsets.items() if abs(o) > limit]
+        if phases_s is not None:
+            rel = relative(phases_s)
+            found = [(c, o) for c, o in found
+                     if c in rel and abs(rel[c] - o) <= max(abs(o) / 3.0, floor_s)]
         if found and len(offsets) > 2:
             # with three or more cameras the odd one out is the one that is off; a camera the
             # others all agree with is not named because of it
             found = [(c, o) for c, o in found if abs(o) >= 0.5 * max(abs(x) for _, x in found)]
         return sorted(found, key=lambda co: -abs(co[1]))
+
+
+def relative(values: Dict[str, float]) -> Dict[str, float]:
+    """Return each finite value minus the median of the other cameras' finite values."""
+    finite = {c: v for c, v in values.items() if np.isfinite(v)}
+    return {c: v - float(np.median([o for k, o in finite.items() if k != c]))
+            for c, v in finite.items() if len(finite) > 1}
 
 
 def describe_offset(camera: str, offset_s: float, period_s: float,

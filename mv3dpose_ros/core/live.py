@@ -300,8 +300,9 @@ class LiveFusion:
         if not rates:
             return
         period_s = 1.0 / float(np.median(rates))
+        phases = {c: stats[c].offset_mean_s for c in self.camera_ids}
         self.clock_suspects = dict(
-            self.stamp_offsets.suspects(period_s, fraction, CLOCK_WARN_FLOOR_S))
+            self.stamp_offsets.suspects(period_s, fraction, CLOCK_WARN_FLOOR_S, phases))
         for cam, offset_s in self.clock_suspects.items():
             self.log.throttled(f'{cam}:clock_offset', describe_offset(cam, offset_s, period_s))
 
