@@ -13,10 +13,13 @@
 # limitations under the License.
 
 """
-``mv3dpose calibrate`` on real detections (Pose2Sim: 2 people, 4 cameras, OpenPose BODY_25B).
+``mv3dpose calibrate`` on real detections and on a Shelf-like proxy.
 
-Calibrated from its people only and compared with its Qualisys calibration, a bumped camera
-found by ``--refine``, and each bad input's message.
+Pose2Sim (2 people, 4 cameras, real OpenPose BODY_25B): calibrated from its people only and
+compared with its Qualisys calibration, a bumped camera found by ``--refine``, and each bad
+input's message. Shelf proxy (the Shelf rig, 4 people milling about its shelf, seen through a
+real detector's errors): the rig from the 2D detections only, and tracking with it scored
+against tracking with the true rig.
 """
 
 import os
@@ -25,15 +28,69 @@ import shutil
 from mv3dpose_ros import cli
 from mv3dpose_ros.core.calibration import load_calibration, save_rig_yaml
 from mv3dpose_ros.core.camera import Camera
-from mv3dpose_ros.core.selfcal import align_to, camera_errors
+from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.output import LiveOutput
+from mv3dpose_ros.core.selfcal import align_to, calibrate, camera_errors, normalise_views
+from mv3dpose_ros.core.types import TrackState
+from mv3dpose_ros.eval.sequence import evaluate_run, GroundTruth
+from mv3dpose_ros.sim.detector import detect, DetectorNoise
+from mv3dpose_ros.sim.people import simulate_people, WalkConfig
 import numpy as np
 import pytest
 
-DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..',
-                    'shared', 'data', 'pose2sim_multiperson')
+SHARED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..',
+                      'shared', 'data')
+DATA = os.path.join(SHARED, 'pose2sim_multiperson')
 CALIB = os.path.join(DATA, 'Calib_qualisys.toml')
 POSES = os.path.join(DATA, 'pose')
-pytestmark = pytest.mark.skipif(not os.path.isdir(DATA), reason=f'no Pose2Sim data at {DATA}')
+SHELF = os.path.join(SHARED, 'shelf', 'calibration_shelf.json')
+needs_p2s = pytest.mark.skipif(not os.path.isdir(DATA), reason=f'no Pose2Sim data at {DATA}')
+needs_shelf = pytest.mark.skipif(not os.path.isfile(SHELF), reason=f'no Shelf rig at {SHELF}')
+
+#: A real detector's errors on Shelf-like images (people 300-500 px tall): 3 px + 1 % of the
+#: height of noise, 5 % missed joints and people, a false person every 10 frames per camera,
+#: 3 % left/right swaps, 2 % joints 60 px off. (No view-dependent joint bias: real detectors
+#: have some, Pose2Sim's figures show its size.)
+REAL_DETECTOR = DetectorNoise(pixel_noise_px=3.0, relative_noise=0.01, joint_miss_rate=0.05,
+                              person_miss_rate=0.05, false_positive_rate=0.1, swap_rate=0.03,
+                              outlier_rate=0.02, outlier_px=60.0)
+
+
+def shelf_proxy(frames: int, people: int = 4, seed: int = 1):
+    """
+    Return ``(cameras, gt [T, M, 17, 3], views)``: the Shelf rig, people milling about its shelf.
+
+    The people walk slowly (0.3-1 m/s) in a 1.4 m radius around the point the five cameras
+    look at, COCO-17 joints, 25 fps, seen through ``REAL_DETECTOR``.
+    """
+    cams = load_calibration(SHELF)
+    walk = WalkConfig(area_radius_m=1.4, center=(0.45, -0.3), speed_range_mps=(0.3, 1.0),
+                      min_separation_m=0.6)
+    gt, _, _ = simulate_people(people, frames, 25.0, 'coco17', walk, None,
+                               np.random.default_rng(seed))
+    views, _ = detect(cams, gt, 'coco17', REAL_DETECTOR, seed=seed + 1)
+    return cams, gt, views
+
+
+def self_calibrate(cams: dict, views: list, layout: str, every: int = 1, **kw):
+    """Calibrate ``cams``' extrinsics from the detections ``views`` (every ``every``-th frame)."""
+    sv = normalise_views(((k, v) for k, v in enumerate(views[::every])), cams, layout)
+    return calibrate(sv, cams, layout, **kw)
+
+
+def track_score(cams: dict, layout: str, views: list, gt, fps: float, frames=None):
+    """Track ``views`` (Fusion + the live output) and score: ``(PCP %, MPJPE mm)``."""
+    fusion = Fusion(cams, layout)
+    output = LiveOutput(fusion.config.publish_coast_s)
+    num = fusion.layout.num_joints
+    hyps = {}
+    for f, v in enumerate(views):
+        tracks = [t for t in output.step(fusion.step(v, f / fps), f / fps)[0]
+                  if t.state in (TrackState.CONFIRMED, TrackState.COASTING)]
+        hyps[f] = (np.array([t.track_id for t in tracks], dtype=int),
+                   np.array([t.joints for t in tracks]).reshape(len(tracks), num, 3))
+    rep = evaluate_run(layout, hyps, gt, frames=frames)
+    return 100 * rep.pcp.average, 1000 * rep.mpjpe.mpjpe_m
 
 
 def _run(capsys, *argv):
@@ -59,6 +116,24 @@ def _copy(tmp_path, frames, edit=None):
     return str(root)
 
 
+@needs_shelf
+def test_shelf_proxy_tracks_as_well_with_the_estimated_rig():
+    cams, gt, views = shelf_proxy(80)
+    res = self_calibrate(cams, views, 'coco17')
+    assert sorted(res.cameras) == sorted(cams) and not res.unplaced
+    # the estimated rig in the true one's frame (a similarity on centres and orientations)
+    aligned, _ = align_to(res.cameras, cams, robust=False)
+    for name, (deg, metres) in camera_errors(aligned, cams).items():
+        assert deg < 0.5 and metres < 0.05, (name, deg, metres)
+    ids = np.arange(gt.shape[1])
+    truth = GroundTruth('coco17', {f: (ids, gt[f]) for f in range(len(gt))})
+    pcp_true, mm_true = track_score(cams, 'coco17', views, truth, 25.0, range(10, len(gt)))
+    pcp_est, mm_est = track_score(aligned, 'coco17', views, truth, 25.0, range(10, len(gt)))
+    assert pcp_est > pcp_true - 3.0, (pcp_est, pcp_true)
+    assert mm_est < mm_true + 15.0, (mm_est, mm_true)
+
+
+@needs_p2s
 def test_pose2sim_from_people_only(tmp_path, capsys):
     out = str(tmp_path / 'rig.yaml')
     code, text, err = _run(capsys, '--calibration', CALIB, '--poses', POSES, '--layout',
@@ -90,9 +165,26 @@ def _bump(cam: Camera, deg: float, metres: float) -> Camera:
     return Camera.from_pose(cam.name, cam.K, cam.dist, R_wc, centre, cam.width, cam.height)
 
 
-@pytest.mark.xfail(strict=True, reason='known gap: on real Pose2Sim detections the adjustment '
-                   'moves every camera ~0.4-0.9 deg / 3-8 cm towards the detections, and the '
-                   'bumped one only 2 deg / 3 cm (see docs/calibrate.md, Limits)')
+@needs_shelf
+def test_refine_finds_and_corrects_a_bumped_camera_in_the_shelf_proxy():
+    cams, _, views = shelf_proxy(60, seed=3)
+    bumped = dict(cams)
+    bumped['2'] = _bump(cams['2'], 3.0, 0.10)
+    res = self_calibrate(cams, views, 'coco17', initial=bumped)
+    assert sorted(res.cameras) == sorted(cams) and not res.unplaced
+    moved = camera_errors(res.cameras, bumped)
+    assert moved['2'][0] > 2.5 and moved['2'][1] > 0.07, moved
+    for name in ('0', '1', '3', '4'):        # the good cameras hold the frame
+        assert moved[name][0] < 0.05 and moved[name][1] < 0.005, (name, moved)
+    fixed = camera_errors(res.cameras, cams)['2']
+    assert fixed[0] < 0.3 and fixed[1] < 0.03, fixed
+
+
+@needs_p2s
+@pytest.mark.xfail(strict=True, reason='known gap: on real Pose2Sim detections cam_03 is found '
+                   '(moved 2.6 deg) and the good cameras hold the frame, but fitted to the '
+                   'detections it lands 0.99 deg / 12 cm off Qualisys: the detections disagree '
+                   'with Qualisys (13 px median reprojection; see docs/calibrate.md, Limits)')
 def test_refine_finds_and_corrects_a_bumped_camera(tmp_path, capsys):
     ref = load_calibration(CALIB)
     bumped = dict(ref)
@@ -113,6 +205,7 @@ def test_refine_finds_and_corrects_a_bumped_camera(tmp_path, capsys):
     assert 'moved deg' in text
 
 
+@needs_p2s
 def test_too_few_frames(tmp_path, capsys):
     root = _copy(tmp_path, range(4))
     code, _, err = _run(capsys, '--calibration', CALIB, '--poses', root, '--layout',
@@ -121,6 +214,7 @@ def test_too_few_frames(tmp_path, capsys):
     assert not os.path.exists(tmp_path / 'rig.yaml')
 
 
+@needs_p2s
 def test_people_standing_still(tmp_path, capsys):
     def same_frame(cam, k, src, dst):      # every file is the first frame: nobody moves
         shutil.copy(os.path.join(os.path.dirname(src), sorted(os.listdir(
@@ -131,6 +225,7 @@ def test_people_standing_still(tmp_path, capsys):
     assert code == 2 and 'degenerate motion' in err, err
 
 
+@needs_p2s
 def test_intrinsics_missing_for_a_camera(tmp_path, capsys):
     root = _copy(tmp_path, range(12))
     shutil.copytree(os.path.join(root, 'cam04_json'), os.path.join(root, 'cam09_json'))
@@ -139,8 +234,7 @@ def test_intrinsics_missing_for_a_camera(tmp_path, capsys):
     assert code == 2 and 'intrinsics missing' in err and 'cam09_json' in err, err
 
 
-@pytest.mark.xfail(strict=True, reason='known gap: with 2 people, chance epipolar agreement of '
-                   'shuffled frames still gives 52-85 person matches, so the camera is placed')
+@needs_p2s
 def test_camera_that_never_shares_a_person(tmp_path, capsys):
     def shuffled(cam, k, src, dst):        # cam_04 sees other instants than the rest
         if cam == 'cam04_json':

@@ -84,6 +84,11 @@ class Settings:
     outlier_px: float = 25.0        # observations dropped before the last adjustment
     max_points: int = 20000         # joints kept for the adjustment (evenly over frames)
     init_points: int = 3000         # ... and while cameras are being placed
+    odd_ratio: float = 4.0          # a camera this many times further off the others'
+    odd_px: float = 25.0            # ... triangulations than the rest and this far: unplaced
+    bumped_ratio: float = 4.0       # refine: a camera whose image moves this many times more
+    bumped_px: float = 8.0          # ... than the others' and this far, fitted to the others'
+    #                                 triangulations, is re-placed and adjusted alone
     seed: int = 0
 
 
@@ -169,6 +174,15 @@ def normalise_views(sequence: Iterable[Tuple[int, Mapping[str, np.ndarray]]],
     return Views(names, frames, people, {c: intrinsics[c].focal for c in names})
 
 
+def _nanmedian(a: np.ndarray) -> np.ndarray:
+    """Return the median over the last axis ignoring NaN (numpy's is 20x slower on small rows)."""
+    a = np.sort(a, axis=-1)                  # NaN sort last
+    n = np.isfinite(a).sum(-1)
+    lo = np.take_along_axis(a, np.maximum((n - 1) // 2, 0)[..., None], -1)[..., 0]
+    hi = np.take_along_axis(a, np.maximum(n // 2, 0)[..., None], -1)[..., 0]
+    return np.where(n > 0, 0.5 * (lo + hi), np.nan)
+
+
 def _height(p: np.ndarray) -> np.ndarray:
     """Return the ``[P]`` 2D extents (max of box width and height) of people ``[P, J, 3]``."""
     if not len(p):
@@ -190,9 +204,7 @@ def track_2d(frames: List[np.ndarray], gate: float = 0.35) -> List[np.ndarray]:
         cur = np.full(len(p), -1)
         if len(p) and len(prev):
             d = np.linalg.norm(p[:, None, :, :2] - prev[None, :, :, :2], axis=-1)
-            with np.errstate(invalid='ignore'):
-                cost = np.nanmedian(np.where(np.isfinite(d), d, np.nan), axis=2) if d.size \
-                    else d
+            cost = _nanmedian(d) if d.size else d.sum(-1)
             size = np.maximum(_height(p)[:, None], _height(prev)[None, :])
             cost = np.where(np.isfinite(cost), cost / np.maximum(size, 1e-9), 1e9)
             rows, cols = linear_sum_assignment(cost)
@@ -231,8 +243,7 @@ def _pair_cost(E: np.ndarray, pa: np.ndarray, pb: np.ndarray, flip: np.ndarray,
     for k, q in enumerate((pb, pb[:, flip])):
         d = _sampson(E, pa[:, None, :, :2], q[None, :, :, :2])
         ok = np.isfinite(d)
-        with np.errstate(invalid='ignore'):
-            med = np.nanmedian(np.where(ok, d, np.nan), axis=2) / size
+        med = _nanmedian(d) / size
         med = np.where((ok.sum(2) >= min_common) & np.isfinite(med), med, np.inf)
         better = med < best
         best = np.where(better, med, best)
@@ -278,16 +289,29 @@ def _correspondences(views: Views, a: str, b: str, pairs, flip: np.ndarray):
     return np.concatenate(xa), np.concatenate(xb), np.concatenate(w)
 
 
-def _essential(xa: np.ndarray, xb: np.ndarray, thr: float, seed: int):
-    """Return ``(E, inlier mask)`` by 5-point RANSAC on normalised coordinates, or None."""
+def _essential(xa: np.ndarray, xb: np.ndarray, thr: float, seed: int, limit: int = 0,
+               iterations: int = 1000):
+    """
+    Return ``(E, inlier mask)`` by 5-point RANSAC on normalised coordinates, or None.
+
+    ``limit``: at most this many correspondences (evenly picked) feed the RANSAC, the mask
+    is then that of all of them; a wrong hypothesis has few inliers and would otherwise run
+    every iteration on every joint.
+    """
     if len(xa) < 8:
         return None, None
+    sel = np.linspace(0, len(xa) - 1, limit).astype(int) if limit and len(xa) > limit \
+        else slice(None)
     cv2.setRNGSeed(seed)
-    E, mask = cv2.findEssentialMat(xa.reshape(-1, 1, 2), xb.reshape(-1, 1, 2), np.eye(3),
-                                   method=cv2.RANSAC, prob=0.999, threshold=thr)
+    E, mask = cv2.findEssentialMat(xa[sel].reshape(-1, 1, 2), xb[sel].reshape(-1, 1, 2),
+                                   np.eye(3), method=cv2.RANSAC, prob=0.999, threshold=thr,
+                                   maxIters=iterations)
     if E is None or E.shape[0] < 3:
         return None, None
-    return E[:3], mask.ravel().astype(bool)
+    E = E[:3]
+    if not isinstance(sel, slice):
+        mask = _sampson(E, xa, xb) < thr
+    return E, np.asarray(mask).ravel().astype(bool)
 
 
 def estimate_pair(views: Views, a: str, b: str, layout: Layout,
@@ -327,7 +351,7 @@ def estimate_pair(views: Views, a: str, b: str, layout: Layout,
             if len(items) < 3:
                 continue
             xa, xb, _ = _correspondences(views, a, b, items, flip)
-            E, _ = _essential(xa, xb, thr, s.seed)
+            E, _ = _essential(xa, xb, thr, s.seed, 400, 300)
             if E is None:
                 continue
             score = sum(len(v) for v in _score(E, views, a, b, flip, s, probe).values())
@@ -340,7 +364,7 @@ def estimate_pair(views: Views, a: str, b: str, layout: Layout,
     for k in range(3):
         items = [(f, [(pa, pb, fl) for pa, pb, fl, _ in v]) for f, v in matches.items()]
         xa, xb, _ = _correspondences(views, a, b, items, flip)
-        E2, mask = _essential(xa, xb, thr, s.seed)
+        E2, mask = _essential(xa, xb, thr, s.seed, 3000)
         if E2 is None:
             break
         if k == 0:
@@ -526,14 +550,22 @@ def _observed_by(prob: bundle.Problem, cams: Sequence[int]) -> bundle.Problem:
                           prob.focal)
 
 
-def _bundle(R, t, pts: Points, placed: Sequence[int], fixed: int, s: Settings,
+def _bundle(R, t, pts: Points, placed: Sequence[int], fixed, s: Settings,
             max_nfev: int = 50, limit: int = 0):
-    """Adjust the ``placed`` cameras and the points they see; return (R, t, X)."""
+    """Adjust the ``placed`` cameras but ``fixed`` (one or several) and their points."""
     if limit and len(pts.frame) > limit:
         R, t, _ = _bundle(R, t, subset_points(pts, _even(len(pts.frame), limit, pts.person)),
                           placed, fixed, s, max_nfev)
         return R, t, bundle.triangulate(R, t, _observed_by(pts.prob, placed), len(pts.frame))
     sub = _observed_by(pts.prob, placed)
+    X = bundle.triangulate(R, t, sub, len(pts.frame))
+    # gross errors (wrong person matches, points behind a camera) out before adjusting:
+    # a robust loss bounds their pull only once they are near, far off they steer the rig
+    res = bundle.residuals_px(R, t, np.nan_to_num(X), sub)
+    med = float(np.nanmedian(res)) if np.isfinite(res).any() else np.inf
+    gate = np.isfinite(res) & (res < max(2 * s.outlier_px, 8 * med))
+    sub = bundle.Problem(sub.camera[gate], sub.point[gate], sub.xy[gate], sub.weight[gate],
+                         sub.focal)
     X = bundle.triangulate(R, t, sub, len(pts.frame))
     ok = np.isfinite(X).all(1)
     if not ok.any():
@@ -542,11 +574,106 @@ def _bundle(R, t, pts: Points, placed: Sequence[int], fixed: int, s: Settings,
     new[ok] = np.arange(ok.sum())
     o = ok[sub.point]
     sub = bundle.Problem(sub.camera[o], new[sub.point[o]], sub.xy[o], sub.weight[o], sub.focal)
-    fixed_all = [c for c in range(len(R)) if c not in set(placed)] + [fixed]
+    fixed_all = [c for c in range(len(R)) if c not in set(placed)] + list(np.atleast_1d(fixed))
     R, t, Xo, _ = bundle.adjust(R, t, X[ok], sub, fixed=fixed_all, loss_px=s.loss_px,
                                 max_nfev=max_nfev)
     X[ok] = Xo
     return R, t, X
+
+
+def _pnp(X: np.ndarray, prob: bundle.Problem, c: int, focal: float, px: float = 4.0):
+    """Return camera ``c``'s ``(R, t)`` from its views of the points ``X`` (RANSAC), or None."""
+    o = (prob.camera == c) & np.isfinite(X).all(1)[prob.point]
+    obj, img = X[prob.point[o]], prob.xy[o]
+    if len(obj) < 12:
+        return None
+    okp, rvec, tvec, inl = cv2.solvePnPRansac(obj, img, np.eye(3), None,
+                                              reprojectionError=px / focal, iterationsCount=500,
+                                              confidence=0.999, flags=cv2.SOLVEPNP_EPNP)
+    if not okp or inl is None or len(inl) < 12:
+        return None
+    inl = inl.ravel()
+    _, rvec, tvec = cv2.solvePnP(obj[inl], img[inl], np.eye(3), None, rvec, tvec, True,
+                                 cv2.SOLVEPNP_ITERATIVE)
+    return cv2.Rodrigues(rvec)[0], tvec.ravel()
+
+
+def held_out_px(R: np.ndarray, t: np.ndarray, pts: Points, cams: Sequence[int],
+                exclude: Sequence[int] = (), shift: bool = False) -> Dict[int, float]:
+    """
+    Return per camera the median px between its joints and the others' triangulations.
+
+    Each camera of ``cams`` is checked against the people the other cameras (not in
+    ``exclude``) triangulate without it (the best of all of them and all but one): a camera
+    that sees other instants or other people, or was bumped, stands out; one fitted into an
+    adjustment cannot hide its disagreement. NaN where fewer than 30 joints can be checked.
+    ``shift``: instead, how far (median px) its image of those people moves when its pose is
+    fitted to them: the systematic part only, which noise does not inflate (a bumped camera).
+    """
+    out = {}
+    for c in cams:
+        others = [o for o in cams if o != c and o not in set(exclude)]
+        # with three others or more, also without each one: an odd camera among the others
+        # must not make a good one look odd
+        trials = [others] + ([[o for o in others if o != e] for e in others]
+                             if len(others) >= 3 else [])
+        out[c] = float('nan')
+        for use in trials:
+            X = bundle.triangulate(R, t, _observed_by(pts.prob, use), len(pts.frame))
+            own = _observed_by(pts.prob, [c])
+            r = bundle.residuals_px(R, t, X, own)
+            ok = np.isfinite(r)
+            if ok.sum() < 30:
+                continue
+            v = float(np.median(r[ok]))
+            if shift:
+                v = _pose_shift_px(R[c], t[c], X[own.point[ok]], own.xy[ok], r[ok],
+                                   float(pts.prob.focal[c]))
+            if not v >= out[c]:
+                out[c] = v
+    return out
+
+
+def _pose_shift_px(R: np.ndarray, t: np.ndarray, X: np.ndarray, xy: np.ndarray,
+                   r: np.ndarray, focal: float) -> float:
+    """Return the median px the camera's image of ``X`` moves when its pose is fitted to them."""
+    keep = r < max(50.0, 3 * float(np.median(r)))
+    if keep.sum() < 12:
+        return float('nan')
+    rvec = cv2.Rodrigues(R)[0]
+    rvec, tvec = cv2.solvePnPRefineLM(X[keep].reshape(-1, 1, 3), xy[keep].reshape(-1, 1, 2),
+                                      np.eye(3), None, rvec.copy(), t.reshape(3, 1).copy())
+    R2 = cv2.Rodrigues(rvec)[0]
+    a, b = X @ R.T + t, X @ R2.T + tvec.ravel()
+    with np.errstate(divide='ignore', invalid='ignore'):
+        d = np.linalg.norm(a[:, :2] / a[:, 2:] - b[:, :2] / b[:, 2:], axis=1) * focal
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if len(d) else float('nan')
+
+
+def odd_cameras(R: np.ndarray, t: np.ndarray, pts: Points, cams: Sequence[int],
+                ratio: float, floor_px: float, shift: bool = False
+                ) -> Tuple[List[int], Dict[int, float]]:
+    """
+    Return ``(odd, px)``: cameras whose ``held_out_px`` stands out, worst first, and the figures.
+
+    One by one, the camera over ``ratio`` times the median of the rest and over ``floor_px``
+    is set aside (and no longer triangulates for the others) while three cameras remain.
+    """
+    odd: List[int] = []
+    px = held_out_px(R, t, pts, cams, shift=shift)
+    while len(cams) - len(odd) >= 3:
+        rest = {c: v for c, v in px.items() if c not in odd and np.isfinite(v)}
+        if len(rest) < 3:
+            break
+        worst = max(rest, key=rest.get)
+        med = float(np.median([v for c, v in rest.items() if c != worst]))
+        if rest[worst] > max(floor_px, ratio * med):
+            odd.append(worst)
+            px = {**held_out_px(R, t, pts, cams, odd, shift), **{c: px[c] for c in odd}}
+        else:
+            break
+    return odd, px
 
 
 def _initial_rig(views: Views, pts: Points, pairs: Sequence[PairResult], s: Settings):
@@ -585,19 +712,11 @@ def _initial_rig(views: Views, pts: Points, pairs: Sequence[PairResult], s: Sett
             why[name] = (f'sees only {counts[c]} joints the placed cameras triangulated '
                          '(need 30)')
             continue
-        o = (prob.camera == c) & finite[prob.point]
-        obj, img = X[prob.point[o]], prob.xy[o]
-        thr = 4.0 / views.focal[name]
-        okp, rvec, tvec, inl = cv2.solvePnPRansac(obj, img, np.eye(3), None,
-                                                  reprojectionError=thr, iterationsCount=500,
-                                                  confidence=0.999, flags=cv2.SOLVEPNP_EPNP)
-        if not okp or inl is None or len(inl) < 12:
+        pose = _pnp(X, prob, c, views.focal[name])
+        if pose is None:
             why[name] = 'no consistent pose from its joints (PnP found no inlier set)'
             continue
-        inl = inl.ravel()
-        _, rvec, tvec = cv2.solvePnP(obj[inl], img[inl], np.eye(3), None, rvec, tvec, True,
-                                     cv2.SOLVEPNP_ITERATIVE)
-        R[c], t[c] = cv2.Rodrigues(rvec)[0], tvec.ravel()
+        R[c], t[c] = pose
         placed.append(c)
         R, t, X = _bundle(R, t, pts, placed, a, s, 30, s.init_points)
     return R, t, placed, why, a
@@ -810,6 +929,45 @@ def check_views(views: Views, s: Settings) -> None:
 
 
 # ------------------------------------------------------------------------------------ main
+def _final_adjustment(R, t, pts: Points, placed: Sequence[int], fixed, s: Settings,
+                      lay: Layout):
+    """Adjust, drop observations far off and implausible people, adjust again."""
+    R, t, X = _bundle(R, t, pts, placed, fixed, s, 50)
+    res = bundle.residuals_px(R, t, X, pts.prob)
+    thr = max(s.outlier_px, 5 * float(np.nanmedian(res)))
+    keep = np.isfinite(res) & (res < thr) & plausible_people(X, pts, lay)[pts.prob.point]
+    pts = _drop_observations(pts, keep)
+    R, t, X = _bundle(R, t, pts, placed, fixed, s, 50)
+    return R, t, X, pts
+
+
+def _refine_start(R, t, pts: Points, placed: List[int], s: Settings, names, log):
+    """
+    Refine: find the cameras the people disagree with and re-place them; return the fixed.
+
+    A bumped camera's joints stand out from where the other cameras triangulate them; it is
+    placed again by PnP on those triangulations and adjusted alone, the others holding the
+    given frame. Without such a camera all but the first move (a drifted rig).
+    """
+    bumped, px = odd_cameras(R, t, pts, placed, s.bumped_ratio, s.bumped_px, shift=True)
+    if not bumped:
+        log('refine: no camera stands out (median px its image moves when fitted to the '
+            "others' triangulations: "
+            + ', '.join(f'{names[c]} {v:.1f}' for c, v in px.items()) + '); adjusting all')
+        return placed[0]
+    good = [c for c in placed if c not in bumped]
+    X = bundle.triangulate(R, t, _observed_by(pts.prob, good), len(pts.frame))
+    for c in bumped:
+        pose = _pnp(X, pts.prob, c, float(pts.prob.focal[c]), 2 * s.loss_px)
+        if pose is not None:
+            R[c], t[c] = pose
+    log('refine: ' + ', '.join(f'{names[c]} ({px[c]:.1f} px)' for c in bumped)
+        + " stand(s) out: fitted to the others' triangulations their image moves that much ("
+        + ', '.join(f'{names[c]} {px[c]:.1f}' for c in good) + ' px): adjusted alone, '
+        + ', '.join(names[c] for c in good) + ' hold the frame')
+    return good
+
+
 def calibrate(views: Views, intrinsics: Mapping[str, Camera], layout: str,
               settings: Optional[Settings] = None, initial: Optional[Mapping[str, Camera]] = None,
               person_height: float = ADULT_HEIGHT_M,
@@ -849,30 +1007,45 @@ def calibrate(views: Views, intrinsics: Mapping[str, Camera], layout: str,
     if not usable:
         raise SelfCalError('no camera pair shares enough people: '
                            + '; '.join(f'{c} {w}' for c, w in unplaced.items()))
-    groups = group_people(views, usable)
-    pts = build_points(views, groups, lay, s.max_points, s.seed)
     idx = {c: k for k, c in enumerate(names)}
-    if initial is None:
-        R, t, placed, why, ref = _initial_rig(views, pts, usable, s)
-        unplaced.update({c: w for c, w in why.items() if c not in unplaced})
-    else:
-        R = np.array([initial[c].R for c in names])
-        t = np.array([initial[c].t for c in names])
-        placed = [idx[c] for c in names if c not in unplaced]
-        ref = placed[0]
-    placed = [c for c in placed if names[c] not in unplaced]
-    for c in names:
-        if idx[c] not in placed and c not in unplaced:
-            unplaced[c] = 'not reached from the placed cameras'
-    # final adjustment, observations far off dropped, adjusted again
-    pts = subset_points(pts, np.ones(len(pts.frame), bool))
-    pts = _drop_observations(pts, np.isin(pts.prob.camera, placed))
-    R, t, X = _bundle(R, t, pts, placed, ref, s, 50)
-    res = bundle.residuals_px(R, t, X, pts.prob)
-    thr = max(s.outlier_px, 5 * float(np.nanmedian(res)))
-    keep = np.isfinite(res) & (res < thr) & plausible_people(X, pts, lay)[pts.prob.point]
-    pts = _drop_observations(pts, keep)
-    R, t, X = _bundle(R, t, pts, placed, ref, s, 50)
+    while True:
+        groups = group_people(views, usable)
+        pts = build_points(views, groups, lay, s.max_points, s.seed)
+        if initial is None:
+            R, t, placed, why, ref = _initial_rig(views, pts, usable, s)
+            unplaced.update({c: w for c, w in why.items() if c not in unplaced})
+        else:
+            R = np.array([initial[c].R for c in names])
+            t = np.array([initial[c].t for c in names])
+            placed = [idx[c] for c in names if c not in unplaced]
+            ref = placed[0]
+        placed = [c for c in placed if names[c] not in unplaced]
+        for c in names:
+            if idx[c] not in placed and c not in unplaced:
+                unplaced[c] = 'not reached from the placed cameras'
+        pts = _drop_observations(pts, np.isin(pts.prob.camera, placed))
+        fixed = ref
+        if initial is not None:
+            fixed = _refine_start(R, t, pts, placed, s, names, log)
+        R, t, X, kept = _final_adjustment(R, t, pts, placed, fixed, s, lay)
+        # checked on every observation: those far off were just dropped from the adjustment
+        odd, px = odd_cameras(R, t, pts, placed, s.odd_ratio, s.odd_px)
+        log("median px against the other cameras' triangulations: "
+            + ', '.join(f'{names[c]} {v:.1f}' for c, v in px.items()))
+        pts = kept
+        if not odd:
+            break
+        for c in odd:
+            rest = float(np.nanmedian([v for k, v in px.items() if k not in odd]))
+            unplaced[names[c]] = (
+                f'never shares a person with the others consistently: its people are '
+                f'{px[c]:.0f} px (median) from where the other cameras triangulate them '
+                f'(the others: {rest:.1f} px); does it see other instants, or other people?')
+            log(f'{names[c]}: {unplaced[names[c]]}; calibrating without it')
+        usable = [p for p in usable if p.a not in unplaced and p.b not in unplaced]
+        if not usable:
+            raise SelfCalError('no camera pair shares people consistently: '
+                               + '; '.join(f'{c} {w}' for c, w in unplaced.items()))
     res = bundle.residuals_px(R, t, X, pts.prob)
     good = [names[c] for c in placed]
 
