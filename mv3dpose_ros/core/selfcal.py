@@ -38,9 +38,14 @@ Every joint of one person seen by two cameras at one instant is a correspondence
    position or a named camera, x along the reference camera's horizontal viewing direction;
    metres from a person height prior (anthropometric fractions of stature) or a baseline.
 
-``refine`` starts from a given rig instead of step 4 and maps the result back onto the given
-rig by a similarity fitted to the cameras that moved least, so the good cameras hold the
-frame and the bumped ones show up as moved.
+After step 4 every camera is checked against where the others triangulate its people
+(``odd_cameras``): one far off (other instants, other people) is reported not placed and the
+rig estimated again without it.
+
+``refine`` starts from a given rig instead of step 4. A bumped camera (its image moves far
+more than the others' when fitted to their triangulations) is placed again and adjusted
+alone, the others fixed; without one, all are adjusted and the result is mapped back onto
+the given rig by a similarity fitted to the cameras that moved least.
 """
 
 from dataclasses import dataclass, field
