@@ -27,6 +27,7 @@ and analysis, ``mv3dpose_ros.testing.rig``).
 import os
 import re
 import signal
+import textwrap
 import time
 
 from mv3dpose_ros.testing.processes import NodeProcess
@@ -104,9 +105,10 @@ def test_free_running_rig_tracks_most_sets(shared_data, model, tmp_path):
 def readme_block(marker: str, path: str = 'README.md') -> str:
     """Return the bash block of ``path`` after ``<!-- MARKER ... -->`` (run as typed)."""
     text = open(os.path.join(ROOT, path), encoding='utf-8').read()
-    m = re.search(rf'<!-- {marker}[^>]*-->\n```bash\n(.*?)```', text, re.S)
+    # a block may stand indented in a list item: its lines lose that indent
+    m = re.search(rf'<!-- {marker}[^>]*-->\n( *)```bash\n(.*?)^\1```', text, re.S | re.M)
     assert m, f'{path} has no {marker} block'
-    return m.group(1)
+    return textwrap.dedent(m.group(2))
 
 
 def _readme_recipe() -> str:

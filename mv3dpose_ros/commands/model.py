@@ -31,9 +31,9 @@ import argparse
 import json
 import sys
 
+from mv3dpose_ros.pose2d import fetch as builder    # called through the module: one binding
 from mv3dpose_ros.pose2d import models
 from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
-from mv3dpose_ros.pose2d.fetch import fetch, fetch_int8, FetchError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,11 +88,11 @@ def _fetch(args) -> int:
         print('error: --calibration-images is for --int8', file=sys.stderr)
         return 2
     try:
-        paths = fetch(spec.name, sizes, directory=args.cache_dir, force=args.force)
+        paths = builder.fetch(spec.name, sizes, directory=args.cache_dir, force=args.force)
         if args.int8:
-            paths += fetch_int8(spec.name, sizes, args.calibration_images,
-                                directory=args.cache_dir, force=args.force)
-    except (FetchError, OSError) as exc:
+            paths += builder.fetch_int8(spec.name, sizes, args.calibration_images,
+                                        directory=args.cache_dir, force=args.force)
+    except (builder.FetchError, OSError) as exc:
         print(f'error: model fetch failed: {exc}', file=sys.stderr)
         return 1
     for path in paths:
