@@ -137,7 +137,7 @@ def test_shelf_proxy_tracks_as_well_with_the_estimated_rig():
 def test_pose2sim_from_people_only(tmp_path, capsys):
     out = str(tmp_path / 'rig.yaml')
     code, text, err = _run(capsys, '--calibration', CALIB, '--poses', POSES, '--layout',
-                           'body25b', '-o', out, '--picture')
+                           'body25b', '-o', out, '--picture', '--frame', 'people')
     assert code == 0, err
     est, ref = load_calibration(out), load_calibration(CALIB)
     assert sorted(est) == sorted(ref)
@@ -248,3 +248,16 @@ def test_camera_that_never_shares_a_person(tmp_path, capsys):
     assert code == 3, err
     assert sorted(load_calibration(out)) == ['cam_01', 'cam_02', 'cam_03']
     assert 'cam_04' in text and 'never shares a person' in text
+
+
+@needs_p2s
+def test_pose2sim_keeps_the_frame_of_the_given_calibration(tmp_path, capsys):
+    """By default the rig comes out in the given calibration's frame: no alignment needed."""
+    out = str(tmp_path / 'rig.yaml')
+    code, text, err = _run(capsys, '--calibration', CALIB, '--poses', POSES, '--layout',
+                           'body25b', '-o', out, '--max-frames', '50')
+    assert code == 0, err
+    assert "world frame: the given calibration's" in text
+    est, ref = load_calibration(out), load_calibration(CALIB)
+    for name, (deg, metres) in camera_errors(est, ref).items():
+        assert deg < 1.5 and metres < 0.12, (name, deg, metres)

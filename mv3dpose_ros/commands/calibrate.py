@@ -73,6 +73,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='keypoints below this confidence are not used (default 0.3)')
     parser.add_argument('--max-frames', type=int, default=600,
                         help='use at most this many frames, evenly spread (default 600)')
+    parser.add_argument('--frame', choices=('auto', 'calibration', 'people'), default='auto',
+                        help="world frame: calibration = --calibration's (its credible "
+                             'extrinsics give only the frame: a similarity), people = z up '
+                             'from the floor under the people; auto (default): calibration '
+                             'where its extrinsics are credible and neither --baseline nor '
+                             '--origin-camera is given, else people')
     parser.add_argument('--no-picture', action='store_true', help='do not draw RIG.png')
 
 
@@ -247,7 +253,7 @@ def report_text(result, args, views, layout: str, picture: Optional[str]) -> str
 def run(args) -> int:
     """Calibrate, write the rig, the report and the picture; return the exit code."""
     from mv3dpose_ros.core.calibration import CalibrationError, save_rig_yaml
-    from mv3dpose_ros.core.selfcal import ADULT_HEIGHT_M, calibrate, SelfCalError
+    from mv3dpose_ros.core.selfcal import adopt_frame, ADULT_HEIGHT_M, calibrate, SelfCalError
 
     prog = 'mv3dpose calibrate'
     try:
@@ -279,6 +285,14 @@ def run(args) -> int:
             KeyError) as e:
         print(f'{prog}: {e}', file=sys.stderr)
         return 2
+    if given is None and args.frame != 'people' and args.calibration and (
+            args.frame == 'calibration' or not (baseline or args.origin_camera)):
+        why = adopt_frame(result, cameras)
+        if why:
+            result.world += f' (not the frame of {args.calibration}: {why})'
+            if args.frame == 'calibration':
+                print(f'{prog}: --frame calibration: {why}', file=sys.stderr)
+                return 2
     if args.person_height is not None and (given is not None or baseline):
         print(f'{prog}: note: --person-height is not used ({result.scale})', file=sys.stderr)
     rig = dict(result.cameras)

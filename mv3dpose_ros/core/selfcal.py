@@ -796,6 +796,40 @@ def align_to(est: Mapping[str, Camera], ref: Mapping[str, Camera], robust: bool 
             return moved, use
 
 
+def adopt_frame(result: Result, reference: Mapping[str, Camera],
+                max_deg: float = 5.0, max_ratio: float = 0.15) -> str:
+    """
+    Express ``result`` in ``reference``'s world frame (a robust similarity); '' or why not.
+
+    A rig recalibrated from its people keeps the frame its users know (a robot's ``map``, a
+    benchmark's ground truth) when the old extrinsics are credible: their cameras spread out
+    and, after the similarity, within ``max_deg`` and ``max_ratio`` of the rig's size of the
+    new ones (median over the cameras). Only the 7 degrees of freedom of the frame are taken
+    from them; the cameras' relative poses stay the people's.
+    """
+    names = [n for n in result.cameras if n in reference]
+    if len(names) < 2:
+        return 'fewer than two of its cameras were placed'
+    centres = np.array([reference[n].center for n in names])
+    spread = float(np.sqrt(((centres - centres.mean(0)) ** 2).sum(1).mean()))
+    if not np.isfinite(spread) or spread < 0.05:
+        return 'it has no extrinsics (its camera centres coincide)'
+    moved, used = align_to(result.cameras, reference, robust=True)
+    err = camera_errors({n: moved[n] for n in used}, reference)
+    deg = float(np.median([e[0] for e in err.values()]))
+    dist = float(np.median([e[1] for e in err.values()]))
+    if deg > max_deg or dist > max_ratio * spread:
+        return (f'its extrinsics disagree with the people (median {deg:.1f} deg, '
+                f'{100 * dist:.0f} cm after a similarity)')
+    s, Rs, ts = similarity(result.cameras, reference, used)
+    result.cameras = moved
+    result.points = s * result.points @ Rs.T + ts
+    result.world = (f"the given calibration's (a similarity fitted on {', '.join(used)}; the "
+                    f'cameras are a median {deg:.2f} deg / {100 * dist:.1f} cm from its own)')
+    result.scale = "the given calibration's (the same similarity)"
+    return ''
+
+
 # ------------------------------------------------------------------------------------ world
 def _joint_ids(layout: Layout, names: Iterable[str]) -> List[int]:
     return [layout.index(n) for n in names if layout.has(n)]
