@@ -46,7 +46,7 @@ from typing import Dict, List
 from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K
 from mv3dpose_ros.testing import netns
 from mv3dpose_ros.testing.processes import NodeProcess, stop_all
-from mv3dpose_ros.testing.remote_probe import Recording
+from mv3dpose_ros.testing.remote_probe import cameras_of, Recording
 from mv3dpose_ros.testing.stats import percentile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -96,24 +96,6 @@ def tracks_bytes(tracks: int, joints: int = 17, cameras: int = 4) -> int:
                                      source_cameras=[f'cam_0{i}' for i in range(cameras)])
                      for _ in range(tracks)]
     return len(serialize_message(msg))
-
-
-def wait(rec: Recording, predicate, timeout: float, procs) -> bool:
-    """Poll ``rec`` until ``predicate()`` or ``timeout`` s; a dead process raises."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        rec.poll()
-        if predicate():
-            return True
-        for p in procs:
-            p.check()
-        time.sleep(0.2)
-    return False
-
-
-def cameras_of(messages: List[dict]) -> set:
-    """Return the cameras behind the skeletons of tracks messages."""
-    return {c for m in messages for s in m['skeletons'] for c in s[5]}
 
 
 def latency(messages: List[dict]) -> str:
@@ -175,8 +157,8 @@ def multi_host(args, env: Dict[str, str], tmp: str) -> None:
             # 2. Steady state.
             for host, cams in HOSTS.items():
                 start(host, pre + publishers(cams, args.rate) + 'wait\n', f'publishers_{host}')
-            ok = wait(rec, lambda: cameras_of(rec.tracks[-20:]) >= set(CAMERAS), 180,
-                      list(procs.values()))
+            ok = rec.wait(lambda: cameras_of(rec.tracks[-20:]) >= set(CAMERAS), 180,
+                          list(procs.values()))
             print(f'== steady state ({len(CAMERAS)} cameras x {args.rate:g} Hz, every camera in '
                   f'the tracks at the planner: {ok}, {(time.time_ns() - t0) / NS:.0f} s after '
                   f'start; load {os.getloadavg()[0]:.1f})')
@@ -203,7 +185,7 @@ def multi_host(args, env: Dict[str, str], tmp: str) -> None:
                   f'{kbps(sum(m["bytes"] for m in steady), span)}')
             print(f'  capture -> tracks at the planner: {latency(steady)}')
             # 3. Camera host B's uplink capped; fusion_node's input counts from /diagnostics.
-            seen = wait(diag, lambda: diag.status('fusion_node: cam_01 input'), 20, [])
+            seen = diag.wait(lambda: diag.status('fusion_node: cam_01 input'), 20, [])
             print('== camera host B capped (tc tbf on its eth0, burst 32 kB, latency 200 ms; '
                   f'fusion_node /diagnostics read on its host: {seen})')
             for rate in args.caps:
@@ -243,7 +225,7 @@ def one_host(args, env: Dict[str, str], tmp: str) -> None:
                                                f'testing.remote_probe {shlex.quote(rec.path)} '
                                                '--tracks\n'), os.path.join(tmp, 'probe.log'),
                                      cwd=ROOT, shell=True, env=env))
-            ok = wait(rec, lambda: cameras_of(rec.tracks[-20:]) >= set(CAMERAS), 180, procs)
+            ok = rec.wait(lambda: cameras_of(rec.tracks[-20:]) >= set(CAMERAS), 180, procs)
             time.sleep(3.0)
             ta = time.time_ns()
             time.sleep(args.measure)

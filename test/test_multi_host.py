@@ -50,7 +50,7 @@ from typing import Dict, List
 
 from mv3dpose_ros.testing import netns
 from mv3dpose_ros.testing.processes import NodeProcess, stop_all
-from mv3dpose_ros.testing.remote_probe import Recording
+from mv3dpose_ros.testing.remote_probe import cameras_of, Recording
 from mv3dpose_ros.testing.stats import percentile
 import pytest
 from test_live_rig import readme_block
@@ -96,22 +96,6 @@ def _publishers(cameras: List[str], videos: str) -> str:
         lines.append(f'mv3dpose_image_publisher {shlex.quote(video)} --camera {cam} --rate '
                      f'{RATE_HZ:g} --bounce --preload --calibration $RIG{offset} &')
     return '\n'.join(lines) + '\n'
-
-
-def _cameras_of(messages: List[dict]) -> set:
-    return {c for m in messages for s in m['skeletons'] for c in s[5]}
-
-
-def _wait(rec: Recording, predicate, timeout: float, procs) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        rec.poll()
-        if predicate():
-            return True
-        for p in procs:
-            p.check()
-        time.sleep(0.2)
-    return False
 
 
 def _videos(shared_data: str) -> str:
@@ -171,8 +155,8 @@ def multi_host_rig(shared_data, model, tmp_path_factory):
             procs.update(_start_rig(net, tmp, lambda host: env, HOSTS, videos, record))
             running = list(procs.values())
             # 1. Every camera in the tracks at the planner.
-            out['ready'] = _wait(rec, lambda: _cameras_of(rec.tracks[-20:]) >= set(CAMERAS),
-                                 READY_TIMEOUT_S, running)
+            out['ready'] = rec.wait(lambda: cameras_of(rec.tracks[-20:]) >= set(CAMERAS),
+                                    READY_TIMEOUT_S, running)
             if not out['ready']:
                 return out
             ev['ready'] = time.time_ns()
@@ -187,7 +171,7 @@ def multi_host_rig(shared_data, model, tmp_path_factory):
             time.sleep(OUTAGE_S)
             net.link('cam_b', True)
             ev['up'] = time.time_ns()
-            out['back'] = _wait(rec, lambda: _cameras_of(rec.tracks_between(ev['up'])) >= set(
+            out['back'] = rec.wait(lambda: cameras_of(rec.tracks_between(ev['up'])) >= set(
                 HOSTS['cam_b']), BACK_TIMEOUT_S, running)
             ev['back'] = time.time_ns()
             # 3. The fusion host restarted.
@@ -196,9 +180,9 @@ def multi_host_rig(shared_data, model, tmp_path_factory):
             procs['fusion'] = _start(net, tmp, env, 'fusion', block('fusion-host'),
                                      'fusion_restarted')
             running = list(procs.values())
-            out['restarted'] = _wait(
-                rec, lambda: _cameras_of(rec.tracks_between(ev['fusion_stopped'])) >= set(
-                    CAMERAS), BACK_TIMEOUT_S, running)
+            out['restarted'] = rec.wait(
+                lambda: cameras_of(rec.tracks_between(ev['fusion_stopped'])) >= set(CAMERAS),
+                BACK_TIMEOUT_S, running)
             ev['restarted'] = time.time_ns()
             time.sleep(1.5)                    # one more /diagnostics period
         finally:
@@ -234,7 +218,7 @@ def _report(run: dict) -> str:
     if 'down' in ev:
         away = rec.tracks_between(ev['down'], ev['up'])
         lines.append(f'cam_b away {OUTAGE_S:g} s: {len(away)} tracks messages, cameras '
-                     f'{sorted(_cameras_of(away))}, ids '
+                     f'{sorted(cameras_of(away))}, ids '
                      f'{dict(collections.Counter(s[0] for m in away for s in m["skeletons"]))}')
     if 'back' in ev:
         lines.append(f'cam_b back in the tracks {(ev["back"] - ev["up"]) / NS:.1f} s after the '
@@ -281,7 +265,7 @@ def test_multi_host_rig_as_typed(multi_host_rig):
     arrivals = [ev['down']] + [m['t'] for m in away] + [ev['up']]
     assert max(b - a for a, b in zip(arrivals, arrivals[1:])) / NS <= MAX_GAP_S, report
     later = [m for m in away if m['t'] >= ev['down'] + 2 * NS]     # B's last sets are out
-    assert later and _cameras_of(later) <= set(HOSTS['cam_a']), report
+    assert later and cameras_of(later) <= set(HOSTS['cam_a']), report
     assert any(s[0] == man and s[1] == 1 for m in later for s in m['skeletons']), (man, report)
     # ... and fusion_node names B's cameras in /diagnostics while they are away.
     for cam in HOSTS['cam_b']:
@@ -310,7 +294,7 @@ def test_multi_host_camera_with_a_late_clock_is_reported(multi_host_rig):
     run = multi_host_rig
     rec = run['rec']
     assert run['ready'], _report(run)
-    first = min(m['t'] for m in rec.tracks if OFFSET_CAMERA in _cameras_of([m]))
+    first = min(m['t'] for m in rec.tracks if OFFSET_CAMERA in cameras_of([m]))
     log = run['fusion_log']
     assert f'camera {OFFSET_CAMERA}: stamps ' in log and 'ms later than the rest of the rig' in (
         log), log[-3000:]
@@ -362,8 +346,8 @@ def test_multi_host_static_peers_without_multicast(shared_data, model, tmp_path)
             procs['control'] = _start(net, tmp_path, env, 'control', block('planner-host') + (
                 f'exec python -m mv3dpose_ros.testing.remote_probe {shlex.quote(control)} '
                 '--tracks\n'), 'control')
-            ok = _wait(rec, lambda: _cameras_of(rec.tracks[-20:]) >= set(hosts['cam_a']),
-                       READY_TIMEOUT_S, list(procs.values()))
+            ok = rec.wait(lambda: cameras_of(rec.tracks[-20:]) >= set(hosts['cam_a']),
+                          READY_TIMEOUT_S, list(procs.values()))
             t_ok = time.time_ns()
             if ok:
                 time.sleep(3.0)

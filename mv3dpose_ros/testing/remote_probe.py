@@ -33,9 +33,14 @@ import json
 import os
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional
 
 NS_PER_S = 1_000_000_000
+
+
+def cameras_of(messages: List[dict]) -> set:
+    """Return the cameras behind the skeletons of recorded tracks messages."""
+    return {c for m in messages for s in m['skeletons'] for c in s[5]}
 
 
 class Recording:
@@ -62,6 +67,18 @@ class Recording:
             rec = json.loads(line)
             {'tracks': self.tracks, 'diag': self.diag, 'size': self.sizes}[rec['k']].append(rec)
         return self
+
+    def wait(self, predicate: Callable[[], bool], timeout: float, procs=()) -> bool:
+        """Poll until ``predicate()`` or ``timeout`` s; a watched process that died raises."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.poll()
+            if predicate():
+                return True
+            for p in procs:
+                p.check()
+            time.sleep(0.2)
+        return False
 
     def status(self, suffix: str, since_ns: int = 0, until_ns: Optional[int] = None
                ) -> List[dict]:
