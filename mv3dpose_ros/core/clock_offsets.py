@@ -80,15 +80,18 @@ class StampOffsets:
 
         ``phases_s``: each camera's mean stamp offset within its sets (the synchroniser's);
         when given, a camera is named only where its phase against the other cameras' agrees
-        with its delay offset (within a third of it, at least ``floor_s``).
+        with its delay offset (same sign, the smaller at least 40 % of the larger), and the
+        offset is the mean of the two (each is noisy on a loaded host: the delays with the
+        pipeline's, the phase with the sets a camera misses).
         """
         offsets = self.offsets_s()
         limit = max(fraction * period_s, floor_s)
-        found = [(c, o) for c, o in offsets.items() if abs(o) > limit]
         if phases_s is not None:
             rel = relative(phases_s)
-            found = [(c, o) for c, o in found
-                     if c in rel and abs(rel[c] - o) <= max(abs(o) / 3.0, floor_s)]
+            offsets = {c: 0.5 * (o + rel[c]) for c, o in offsets.items()
+                       if c in rel and o * rel[c] > 0
+                       and min(abs(o), abs(rel[c])) >= 0.4 * max(abs(o), abs(rel[c]))}
+        found = [(c, o) for c, o in offsets.items() if abs(o) > limit]
         if found and len(offsets) > 2:
             # with three or more cameras the odd one out is the one that is off; a camera the
             # others all agree with is not named because of it

@@ -114,7 +114,7 @@ class SyncConfig:
     jump_confirm: int = 3            # consecutive outliers per camera, on >= 2 cameras, that
     #                                  make a sustained jump (reset; e.g. a bag loop)
     stats_window: int = 100          # used messages kept per camera for offset / jitter
-    offset_warn_fraction: float = 0.15  # warn when a camera's stamps stand this share of its
+    offset_warn_fraction: float = 0.1   # warn when a camera's stamps stand this share of its
     #                                  frame period (and >= 5 ms) apart from the rest of the
     #                                  rig's, judged from arrival delays (a host clock that is
     #                                  off); 0 = off (also under sim time)

@@ -85,7 +85,8 @@ class FusionStatus:
                       'skip notices rejected': st.skips_rejected,
                       'offset mean (ms)': ss.offset_mean_s * 1e3,
                       'offset jitter (ms)': ss.offset_jitter_s * 1e3,
-                      K.STAMP_OFFSET_MS: offsets.get(cam, math.nan) * 1e3}
+                      K.STAMP_OFFSET_MS: self.live.clock_suspects.get(
+                          cam, offsets.get(cam, math.nan)) * 1e3}
             for reason, n in sorted(ss.unmatched.items()):
                 values[f'dropped by sync: {reason}'] = n
             for reason, n in sorted(st.rejected.items()):
