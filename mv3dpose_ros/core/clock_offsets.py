@@ -61,6 +61,7 @@ class StampOffsets:
     def reset(self) -> None:
         """Forget every delay (a clock jump: the old delays say nothing of the new clock)."""
         self._delays.clear()
+        self._latest_ns = 0
 
     def _low_delay_s(self, camera: str) -> Optional[float]:
         q = self._delays.get(camera)
@@ -113,7 +114,6 @@ def describe_offset(camera: str, offset_s: float, period_s: float,
     direction = 'later' if offset_s > 0 else 'earlier'
     return (f'camera {camera}{where}: stamps {abs(offset_s) * 1e3:.1f} ms {direction} than the '
             f'rest of the rig ({abs(offset_s) / period_s:.0%} of its {period_s * 1e3:.0f} ms '
-            f'frame period), from arrival delays: views of different instants are fused as '
-            'one set. Check that host clock (chrony: `chronyc tracking`; PTP: linuxptp) '
-            'or the stamping of the driver; a pipeline that much '
-            f'{"faster" if offset_s > 0 else "slower"} than the others reads the same.')
+            'frame period; arrival delays and the phase in the sets agree): views of '
+            'different instants are fused as one set. Check that host clock (chrony: '
+            '`chronyc tracking`; PTP: linuxptp) or the stamping of the camera driver.')
