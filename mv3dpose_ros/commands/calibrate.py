@@ -16,12 +16,14 @@
 ``mv3dpose calibrate``: a rig's extrinsics from the 2D keypoints of the people moving in it.
 
 Intrinsics come from ``--calibration`` (any format ``core.calibration`` reads; its extrinsics
-are ignored unless ``--refine``) or, with ``--bag``, from the bag's CameraInfo where
-``--calibration`` is not given. Keypoints come from per-camera OpenPose JSON folders
+give at most the world frame, unless ``--refine``) or, with ``--bag``, from the bag's
+CameraInfo where ``--calibration`` is not given. Keypoints come from per-camera OpenPose JSON folders
 (``--poses``, as ``mv3dpose track``) or from a bag of ``Person2DArray`` messages (``--bag``,
 e.g. recorded from the live rig with ``mv3dpose bag record``). The estimation is
 ``core.selfcal`` (pairwise person matching and essential matrices, incremental placement,
-bundle adjustment, world frame from the floor and a person height prior).
+bundle adjustment); the world frame is ``--calibration``'s where its extrinsics are credible
+(``--frame auto``: ``core.selfcal.adopt_frame``), else the floor under the people with metres
+from a person height prior.
 
 Output: the rig YAML (``-o``) every command and ``fusion_node`` read, a text report printed
 and written beside it (``RIG.report.txt``) and a picture of the rig (``RIG.png``).
