@@ -17,9 +17,9 @@
 
 Intrinsics come from ``--calibration`` (any format ``core.calibration`` reads; its extrinsics
 give at most the world frame, unless ``--refine``) or, with ``--bag``, from the bag's
-CameraInfo where ``--calibration`` is not given. Keypoints come from per-camera OpenPose JSON folders
-(``--poses``, as ``mv3dpose track``) or from a bag of ``Person2DArray`` messages (``--bag``,
-e.g. recorded from the live rig with ``mv3dpose bag record``). The estimation is
+CameraInfo where ``--calibration`` is not given. Keypoints come from per-camera OpenPose JSON
+folders (``--poses``, as ``mv3dpose track``) or from a bag of ``Person2DArray`` messages
+(``--bag``, e.g. recorded from the live rig with ``mv3dpose bag record``). The estimation is
 ``core.selfcal`` (pairwise person matching and essential matrices, incremental placement,
 bundle adjustment); the world frame is ``--calibration``'s where its extrinsics are credible
 (``--frame auto``: ``core.selfcal.adopt_frame``), else the floor under the people with metres
