@@ -84,9 +84,10 @@ def test_a_camera_gone_quiet_is_not_judged_on_old_delays():
     assert set(mon.offsets_s()) == {'a', 'b'}
 
 
-def test_noisy_delays_and_the_phase_together_name_the_late_camera_at_their_mean():
-    """Delays say 12 ms, the set phase 20 ms: the same sign and size, so 16 ms is named."""
+def test_a_set_phase_of_the_same_sign_and_size_confirms_the_delay_offset():
+    """Delays say 12 ms, the set phase 20 ms: they agree, and the delays' 12 ms is named."""
     mon = feed({'a': 0, 'b': 0, 'c': 12, 'd': 0}, phases=False)
     phases = {'a': -0.005, 'b': -0.005, 'c': 0.015, 'd': -0.005}
     (cam, off), = mon.suspects(PERIOD, 0.1, 0.005, phases)
-    assert cam == 'c' and abs(off - 0.016) < 0.003
+    assert cam == 'c' and abs(off - 0.012) < 0.003
+    assert mon.suspects(PERIOD, 0.1, 0.005, {'a': 0.0, 'b': 0.0, 'c': 0.002, 'd': 0.0}) == []

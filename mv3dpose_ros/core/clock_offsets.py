@@ -81,15 +81,15 @@ class StampOffsets:
 
         ``phases_s``: each camera's mean stamp offset within its sets (the synchroniser's);
         when given, a camera is named only where its phase against the other cameras' agrees
-        with its delay offset (same sign, the smaller at least 40 % of the larger), and the
-        offset is the mean of the two (each is noisy on a loaded host: the delays with the
-        pipeline's, the phase with the sets a camera misses).
+        with its delay offset (same sign, the smaller at least 40 % of the larger). The offset
+        returned is the delays' (the phase confirms it: it is biased towards 0 by the sets a
+        camera shares with cameras that inferred another instant).
         """
         offsets = self.offsets_s()
         limit = max(fraction * period_s, floor_s)
         if phases_s is not None:
             rel = relative(phases_s)
-            offsets = {c: 0.5 * (o + rel[c]) for c, o in offsets.items()
+            offsets = {c: o for c, o in offsets.items()
                        if c in rel and o * rel[c] > 0
                        and min(abs(o), abs(rel[c])) >= 0.4 * max(abs(o), abs(rel[c]))}
         found = [(c, o) for c, o in offsets.items() if abs(o) > limit]
