@@ -153,14 +153,14 @@ def test_dataclass_parameters_from_comments():
     assert 'sync.slop_s' in sync
 
 
-def test_declare_and_build_dataclass_with_overrides(ros_context):
+def test_declare_and_build_config_with_overrides(ros_context):
     node = rclpy.create_node('params_probe', context=ros_context, parameter_overrides=[
         Parameter('cfg.threshold_m', value=0.5), Parameter('cfg.inner.names', value=['z']),
         Parameter('cfg.inner.gain', value=3.0)])
     try:
-        P.declare_dataclass(node, _Outer, 'cfg')
+        P.declare_config(node, _Outer, 'cfg')
         P.declare(node, 'ids', [], 'camera ids', read_only=True)
-        cfg = P.build_dataclass(node, _Outer, 'cfg')
+        cfg = P.build_config(node, _Outer, 'cfg')
         assert cfg == _Outer(threshold_m=0.5, inner=_Inner(gain=3.0, names=('z',)))
         assert P.value(node, 'ids', []) == []
         desc = node.describe_parameter('cfg.threshold_m')

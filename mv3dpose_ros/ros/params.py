@@ -16,9 +16,9 @@
 Declare ROS parameters with descriptors, including every field of a core config dataclass.
 
 Core config dataclasses (``FusionConfig``, ``SyncConfig``) stay the single source of truth for
-names, types and defaults: ``declare_dataclass`` declares ``<prefix>.<field>`` for each scalar
+names, types and defaults: ``declare_config`` declares ``<prefix>.<field>`` for each scalar
 field (recursing into nested dataclasses), with the description taken from the field's
-trailing ``# comment`` in the source (or ``metadata['help']``), and ``build_dataclass`` reads
+trailing ``# comment`` in the source (or ``metadata['help']``), and ``build_config`` reads
 them back into an instance.
 """
 
@@ -158,26 +158,6 @@ def dataclass_parameters(cls: type, prefix: str) -> List[Dict[str, Any]]:
             out.append({'name': name, 'path': [f.name], 'default': list(default),
                         'type': list, 'element': elem, 'description': help_text})
     return out
-
-
-def declare_dataclass(node: Any, cls: type, prefix: str, read_only: bool = True) -> None:
-    """Declare a parameter per field of dataclass ``cls`` under ``prefix``."""
-    for p in dataclass_parameters(cls, prefix):
-        declare(node, p['name'], p['default'], p['description'], read_only=read_only,
-                element_type=p.get('element', str))
-
-
-def build_dataclass(node: Any, cls: type, prefix: str) -> Any:
-    """Build an instance of ``cls`` from the parameters declared by ``declare_dataclass``."""
-    values: Dict[str, Any] = {}
-    for p in dataclass_parameters(cls, prefix):
-        v = value(node, p['name'], p['default'])
-        if p['type'] is float:
-            v = float(v)
-        elif p['type'] is list:
-            v = type(p['default'])(v) if p['default'] is not None else v
-        values[tuple(p['path'])] = v
-    return _assemble(cls, values, ())
 
 
 def _assemble(cls: type, values: Dict[tuple, Any], path: tuple) -> Any:
