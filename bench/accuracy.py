@@ -31,9 +31,9 @@ Deterministic (fixed seeds); figures, not assertions. Usage:
 import argparse
 import os
 
-from mv3dpose_ros.core.calibration import load_calibration
-from mv3dpose_ros.core.fusion import Fusion
-from mv3dpose_ros.core.output import LiveOutput
+from mv3dpose_ros.core.fusion.pipeline import Fusion
+from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.core.live.output import LiveOutput
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.sequence import evaluate_run, GroundTruth, load_ground_truth
 from mv3dpose_ros.io.datasets import load_panoptic_gt
@@ -49,7 +49,7 @@ def run_fusion(cameras, layout, views_seq, stamps):
     """
     Return ``frame -> (ids, poses)`` of the live output and the median reprojection px.
 
-    The live output is what fusion_node publishes on ``~/tracks`` (``core.output``):
+    The live output is what fusion_node publishes on ``~/tracks`` (``core.live.output``):
     confirmed and (for ``publish_coast_s``) coasting tracks.
     """
     fusion = Fusion(cameras, layout)

@@ -32,7 +32,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
              'NUMEXPR_NUM_THREADS', 'VECLIB_MAXIMUM_THREADS'):
     os.environ[_var] = '1'
 
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig  # noqa: E402
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig  # noqa: E402
 from mv3dpose_ros.sim.people import WalkConfig  # noqa: E402
 from mv3dpose_ros.sim.rig import RigConfig  # noqa: E402
 from mv3dpose_ros.sim.scene import make_scene  # noqa: E402

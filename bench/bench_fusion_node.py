@@ -66,8 +66,8 @@ from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K, FusionStatusNames as N
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import numpy_to_person2d_array
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim.people import WalkConfig
@@ -129,7 +129,7 @@ def synthetic_feed(cams: int, people: int, frames: int, rate: float, seed: int =
 
 def real_feed(source: str, cams: int) -> Feed:
     """Return real detections (``pose2sim`` or ``panoptic``) as a coco17 Feed of ``cams``."""
-    from mv3dpose_ros.core.calibration import load_calibration
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
     from mv3dpose_ros.core.skeleton import convert_poses
     from mv3dpose_ros.io.datasets import load_panoptic_gt
     from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
@@ -178,12 +178,11 @@ def micro(cams: int, people: int, rate: float, seed: int = 0) -> None:
     """Print the in-process cost of the node's message paths (no DDS)."""
     # Imported here so that the DDS benchmark also runs against older trees (A/B runs with
     # PYTHONPATH pointing at another checkout).
-    from mv3dpose_ros.core.fusion import Fusion
+    from mv3dpose_ros.core.fusion.pipeline import Fusion
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.ros.markers import tracks_to_markers, tracks_to_markers_cdr
     from mv3dpose_ros.ros.messages import (decode_person2d_array, ns_to_stamp,
-                                           person2d_array_to_numpy, tracks_to_cdr,
-                                           tracks_to_msg)
+                                           person2d_array_to_numpy, tracks_to_cdr, tracks_to_msg)
     scene = _scene(cams, people, 40, rate, seed)
     layout = get_layout(scene.layout)
     fusion = Fusion(scene.cameras, layout)
@@ -342,7 +341,7 @@ def limits(cams: int = 4, persons: int = 2000, rate: float = 30.0) -> None:
     """
     import rclpy
     from rclpy.parameter import Parameter
-    from mv3dpose_ros.core.calibration import save_rig_yaml
+    from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
     from mv3dpose_ros.nodes.fusion_node import FusionNode
     import tempfile
     scene = _scene(cams, 3, 2, rate, 0)

@@ -26,8 +26,8 @@ import time
 for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ[_var] = '1'
 
-from mv3dpose_ros.core.calibration import load_calibration  # noqa: E402
-from mv3dpose_ros.core.camera import Camera, fundamental_matrix  # noqa: E402
+from mv3dpose_ros.core.geometry.calibration import load_calibration  # noqa: E402
+from mv3dpose_ros.core.geometry.camera import Camera, fundamental_matrix  # noqa: E402
 from mv3dpose_ros.core.skeleton import convert_poses  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -354,8 +354,8 @@ def portrait_rig(cams: Sequence[str]) -> Tuple[str, str]:
     """
     import cv2
     import numpy as np
-    from mv3dpose_ros.core.calibration import load_calibration, save_rig_yaml
-    from mv3dpose_ros.core.camera import Camera
+    from mv3dpose_ros.core.geometry.calibration import load_calibration, save_rig_yaml
+    from mv3dpose_ros.core.geometry.camera import Camera
     from mv3dpose_ros.pose2d.estimator import open_estimator
     from mv3dpose_ros.pose2d.models import resolve_model_path
     folder = os.path.join(tempfile.gettempdir(), 'bench_rig_portrait')
@@ -436,8 +436,8 @@ def shipped_max_wait() -> float:
 def run_rig(args: argparse.Namespace, n: int, pose2d_params: List[str]) -> None:
     """Run ``n`` cameras with one image publisher process each and print the figures."""
     from mv3dpose_ros.testing.processes import NodeProcess, stop_all
-    from mv3dpose_ros.testing.rig import (analyse, drop_table, publisher_command,
-                                          published_counts, RigProbe)
+    from mv3dpose_ros.testing.rig import (analyse, drop_table, publisher_command, published_counts,
+                                          RigProbe)
     cams = CAMERAS[:n]
     max_wait = args.max_wait_s
     for item in args.fusion_param:

@@ -177,11 +177,10 @@ def _shift_3d_mm(ref, other) -> list:
 def compare(model: str, threads: int, providers: Sequence[str] = ('auto',)) -> int:
     """Print speed and people found of each fetched variant of ``model`` on each provider."""
     import numpy as np
-    from mv3dpose_ros.core.calibration import load_calibration
-    from mv3dpose_ros.core.fusion import Fusion
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
+    from mv3dpose_ros.core.fusion.pipeline import Fusion
     from mv3dpose_ros.pose2d.estimator import open_estimator
-    from mv3dpose_ros.pose2d.models import (get_spec, list_fetched, model_file, PRECISIONS,
-                                            size_tag)
+    from mv3dpose_ros.pose2d.models import get_spec, list_fetched, model_file, PRECISIONS, size_tag
     demo = os.path.dirname(DATA)
     cams = ('00_03', '00_06', '00_12', '00_13', '00_23')
     frames = ('00004500', '00005514', '00006859', '00009348', '00013007')

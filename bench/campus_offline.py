@@ -36,7 +36,7 @@ import tempfile
 from typing import Optional
 
 from mv3dpose_ros import cli
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 from mv3dpose_ros.eval.sequence import load_ground_truth
 from mv3dpose_ros.sim.detector import detect, DetectorNoise
 import numpy as np

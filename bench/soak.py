@@ -39,8 +39,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import save_rig_yaml
 from mv3dpose_ros.core.diagnostic_keys import FusionStatusNames as N
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array, stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.sim import make_scene

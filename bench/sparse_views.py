@@ -59,10 +59,10 @@ import os
 import sys
 from typing import Callable, Dict, List, Optional
 
-from mv3dpose_ros.core.calibration import load_calibration
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
-from mv3dpose_ros.core.output import LiveOutput
-from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.core.live.output import LiveOutput
+from mv3dpose_ros.core.live.sync import StreamSynchronizer, SyncConfig
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.sequence import evaluate_run, GroundTruth, load_ground_truth
 from mv3dpose_ros.io.datasets import load_panoptic_gt

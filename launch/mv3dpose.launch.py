@@ -42,7 +42,7 @@ def _nodes(context, *args, **kwargs):
     rig = os.path.abspath(rig)
     cameras = [c for c in LaunchConfiguration('cameras').perform(context).split(',') if c]
     if not cameras:
-        from mv3dpose_ros.core.calibration import load_calibration
+        from mv3dpose_ros.core.geometry.calibration import load_calibration
         cameras = list(load_calibration(rig))
     image_topic = LaunchConfiguration('image_topic').perform(context)
     sim_time = LaunchConfiguration('use_sim_time').perform(context).lower() == 'true'

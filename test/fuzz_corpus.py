@@ -86,7 +86,7 @@ def _dump_with(doc, path: List, raw: str) -> str:
 def _calibration_docs(cameras) -> Dict[str, object]:
     """Write the cameras in every calibration format (as documents)."""
     import numpy as np
-    from mv3dpose_ros.core.calibration import PANOPTIC_TO_WORLD, rig_yaml_dict
+    from mv3dpose_ros.core.geometry.calibration import PANOPTIC_TO_WORLD, rig_yaml_dict
     panoptic = {'cameras': []}
     voxelpose = {}
     for name, cam in cameras.items():
@@ -116,7 +116,7 @@ def build_bases(base: Path, data: str) -> Dict[str, Path]:
     """Write the valid inputs every bad variant is derived from; return their paths."""
     import yaml
     from mv3dpose_ros import cli
-    from mv3dpose_ros.core.calibration import load_calibration
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
     src = Path(data) / 'pose2sim_multiperson'
     base.mkdir(parents=True)
     out = {'toml': base / 'calib.toml', 'poses': base / 'poses'}
@@ -178,7 +178,7 @@ def _convert_images_argv(calibration, images, tmp: Path) -> List[str]:
 def _calibration_cases(bases, root: Path) -> List[Case]:
     """Bad calibration files of every format, read by ``track`` and ``convert``."""
     import yaml
-    docs = _calibration_docs(__import__('mv3dpose_ros.core.calibration', fromlist=['x'])
+    docs = _calibration_docs(__import__('mv3dpose_ros.core.geometry.calibration', fromlist=['x'])
                              .load_calibration(str(bases['toml'])))
     texts: List[tuple] = []        # (kind, file name, text)
     pan, vox = docs['panoptic'], docs['voxelpose']

@@ -26,7 +26,7 @@ import time
 from typing import Dict, Iterator, List, Optional, Tuple
 
 from mv3dpose_msgs.msg import Person2DArray
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
 from mv3dpose_ros.ros.messages import ns_to_stamp, numpy_to_person2d_array
 import numpy as np

@@ -14,9 +14,10 @@
 
 """Cross-view association: epipolar cost, gated Hungarian, Algorithm 1 edge cases."""
 
-from mv3dpose_ros.core.association import (associate, camera_order, gated_assignment,
-                                           symmetric_epipolar_distance)
-from mv3dpose_ros.core.camera import essential_matrices
+from mv3dpose_ros.core.assignment import gated_assignment
+from mv3dpose_ros.core.fusion.association import (associate, camera_order,
+                                                  symmetric_epipolar_distance)
+from mv3dpose_ros.core.geometry.camera import essential_matrices
 from mv3dpose_ros.sim.rig import make_rig
 from mv3dpose_ros.sim.scene import make_scene
 import numpy as np

@@ -28,8 +28,8 @@ import threading
 import time
 
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import save_rig_yaml
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.ros.images import numpy_to_image
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.qos import reliable_qos

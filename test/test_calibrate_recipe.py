@@ -25,7 +25,7 @@ import os
 import subprocess
 import sys
 
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 import numpy as np
 from test_live_rig import readme_block
 

@@ -20,11 +20,11 @@ import json
 import os
 
 import cv2
-from mv3dpose_ros.core.calibration import (detect_format, load_calibration,
-                                           load_camera_info_yaml, matrix_to_quaternion,
-                                           PANOPTIC_TO_WORLD, quaternion_to_matrix,
-                                           save_rig_yaml)
-from mv3dpose_ros.core.camera import CalibrationError, Camera, fundamental_matrix
+from mv3dpose_ros.core.geometry.calibration import (detect_format, load_calibration,
+                                                    load_camera_info_yaml, matrix_to_quaternion,
+                                                    PANOPTIC_TO_WORLD, quaternion_to_matrix,
+                                                    save_rig_yaml)
+from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera, fundamental_matrix
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment

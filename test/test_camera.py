@@ -15,8 +15,8 @@
 """Tests of the camera model, undistortion, validation and epipolar geometry."""
 
 import cv2
-from mv3dpose_ros.core.camera import (CalibrationError, Camera, essential_matrix,
-                                      fit_image_size, fundamental_matrix)
+from mv3dpose_ros.core.geometry.camera import (CalibrationError, Camera, essential_matrix,
+                                               fit_image_size, fundamental_matrix)
 import numpy as np
 import pytest
 

@@ -117,7 +117,7 @@ def test_a_sample_as_real_processes(corpus):
 
 def test_outputs_are_atomic_when_a_run_fails_midway(shared_data, tmp_path, monkeypatch):
     """Issue 11 defect 6: a failed track run left a partial file that looked valid."""
-    from mv3dpose_ros.core.fusion import Fusion
+    from mv3dpose_ros.core.fusion.pipeline import Fusion
     bases = build_bases(tmp_path / 'base', shared_data)
     calls = {'n': 0}
     step = Fusion.step

@@ -21,9 +21,9 @@ import subprocess
 import sys
 
 from mv3dpose_ros import cli
-from mv3dpose_ros.core.calibration import load_calibration
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
-from mv3dpose_ros.core.output import LiveOutput, TrackPublisher
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.core.live.output import LiveOutput, TrackPublisher
 from mv3dpose_ros.core.types import JointState
 from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
 from mv3dpose_ros.io.tracks_jsonl import frame_to_line, read_tracks

@@ -14,7 +14,7 @@
 
 """Stamp offsets from arrival delays: the odd camera is named, jitter and phases are not."""
 
-from mv3dpose_ros.core.clock_offsets import describe_offset, StampOffsets
+from mv3dpose_ros.core.live.clock_offsets import describe_offset, StampOffsets
 import numpy as np
 
 NS = 1_000_000_000

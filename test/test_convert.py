@@ -19,8 +19,8 @@ import subprocess
 import sys
 
 import cv2
-from mv3dpose_ros.core.calibration import load_calibration, save_rig_yaml
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry.calibration import load_calibration, save_rig_yaml
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.io.bag import BagReader
 from mv3dpose_ros.io.media import SourceError

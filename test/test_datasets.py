@@ -18,7 +18,7 @@ import json
 import os
 import shutil
 
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout
 from mv3dpose_ros.io.datasets import (CAMPUS_TEST_FRAMES, DatasetError, load_campus_gt,
                                       load_panoptic_gt, panoptic_to_world)

@@ -21,7 +21,7 @@ import os
 
 from mv3dpose_ros import cli
 from mv3dpose_ros.commands.eval import parse_frames
-from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.fusion.pipeline import Fusion
 from mv3dpose_ros.core.skeleton import convert_poses
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.mot import MOTEvaluator

@@ -36,7 +36,7 @@ import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from google.protobuf.timestamp_pb2 import Timestamp
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.fusion.pipeline import Fusion
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.io.foxglove_ws import FoxgloveClient

@@ -16,7 +16,7 @@
 
 import logging
 
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.eval.mot import MOTEvaluator
 from mv3dpose_ros.sim.detector import DetectorNoise

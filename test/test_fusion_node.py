@@ -29,8 +29,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import save_rig_yaml
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.mot import evaluate_mot
 from mv3dpose_ros.eval.mpjpe import mpjpe

@@ -24,8 +24,8 @@ Run with ``-s`` to see the measured figures.
 
 import os
 
-from mv3dpose_ros.core.calibration import load_calibration
-from mv3dpose_ros.core.fusion import Fusion
+from mv3dpose_ros.core.fusion.pipeline import Fusion
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.mpjpe import mpjpe
 from mv3dpose_ros.eval.pcp import evaluate_pcp

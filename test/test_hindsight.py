@@ -14,7 +14,7 @@
 
 """Unit tests of the batch hindsight pass (linking fragments, settling states)."""
 
-from mv3dpose_ros.core.hindsight import settle_tracks
+from mv3dpose_ros.core.tracking.hindsight import settle_tracks
 from mv3dpose_ros.core.types import Track, TrackState as S
 import numpy as np
 

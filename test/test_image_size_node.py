@@ -21,8 +21,8 @@ landscape image against the portrait calibration is dropped as 'image_size'. The
 is test_fusion_node.py's; every wait is bounded by a timeout.
 """
 
-from mv3dpose_ros.core.calibration import save_rig_yaml
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.ros.images import camera_info_from_camera
 from mv3dpose_ros.ros.messages import (msg_to_tracks, ns_to_stamp, numpy_to_person2d_array,

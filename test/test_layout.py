@@ -25,6 +25,10 @@ Floors, lowest first; a package may import its own modules and those of lower fl
 4. ``nodes``, ``commands``, ``testing`` (the test and bench harness), ``cli``: the top. Nodes
    and commands do not import each other; ``testing`` may use both, ``cli`` loads commands.
 
+Inside ``core`` the same rule holds between its stages (``CORE_STAGES``): the shared modules at
+its root (types, skeleton, assignment, files, diagnostic keys) import no stage; ``geometry``,
+``tracking``, ``fusion`` (with ``selfcal`` beside it) and ``live`` import only the stages below.
+
 No command imports another command, except ``demo``, which runs the others. Function-level
 (lazy) imports count: they are imports all the same.
 
@@ -50,6 +54,9 @@ FLOOR = {package: level for level, floor in enumerate(FLOORS) for package in flo
 #: Imports allowed between different packages of one floor: (importer, imported).
 SIDEWAYS = {('io', 'viz'), ('ros', 'io'), ('ros', 'viz'),
             ('testing', 'nodes'), ('testing', 'commands'), ('cli', 'commands')}
+#: The stages of ``core``, lowest first; ``''`` is the shared modules at its root.
+CORE_STAGES = (('',), ('geometry',), ('tracking',), ('fusion', 'selfcal'), ('live',))
+CORE_STAGE = {stage: level for level, floor in enumerate(CORE_STAGES) for stage in floor}
 #: The one command that may import other commands (it runs them).
 RUNS_COMMANDS = 'demo'
 
@@ -136,6 +143,50 @@ def test_imports_run_down_the_floors():
                 found.append(f'{os.path.relpath(path, ROOT)}:{line}: {mine} (floor '
                              f'{FLOOR[mine] + 1}) imports {target} (floor {FLOOR[theirs] + 1})')
     assert not found, '\n'.join(found)
+
+
+def _stage_of(module: str) -> str:
+    """Return the ``core`` stage of a module (``''`` for the shared modules at core's root)."""
+    parts = module.split('.')
+    return parts[2] if len(parts) > 3 else ''
+
+
+def test_core_stages_import_downward():
+    """A stage of ``core`` imports the shared modules and lower stages, never one beside it."""
+    found = []
+    for module, path in _modules():
+        if _package_of(module) != 'core' or module == 'mv3dpose_ros.core':
+            continue
+        mine = _stage_of(module)
+        for line, target in _package_imports(module, path):
+            if _package_of(target) != 'core' or target == 'mv3dpose_ros.core':
+                continue
+            theirs = _stage_of(target)
+            if theirs != mine and CORE_STAGE[theirs] >= CORE_STAGE[mine]:
+                found.append(f'{os.path.relpath(path, ROOT)}:{line}: core stage '
+                             f'{mine or "(shared)"} imports {target}')
+    assert not found, '\n'.join(found)
+
+
+def test_every_core_stage_has_a_map_and_all():
+    """Each stage package names its modules in its docstring and lists them in ``__all__``."""
+    core = os.path.join(PACKAGE, 'core')
+    stages = sorted(d for d in os.listdir(core) if os.path.isfile(os.path.join(core, d,
+                                                                                 '__init__.py')))
+    assert set(stages) == {s for floor in CORE_STAGES for s in floor} - {''}
+    problems = []
+    for stage in stages:
+        tree = ast.parse(open(os.path.join(core, stage, '__init__.py')).read())
+        doc = ast.get_docstring(tree) or ''
+        modules = sorted(n[:-3] for n in os.listdir(os.path.join(core, stage))
+                         if n.endswith('.py') and n != '__init__.py')
+        listed = [ast.literal_eval(node.value) for node in tree.body
+                  if isinstance(node, ast.Assign) and node.targets[0].id == '__all__']
+        if listed != [modules]:
+            problems.append(f'core/{stage}: __all__ {listed} is not its modules {modules}')
+        problems += [f'core/{stage}/__init__.py does not name {m}' for m in modules
+                     if f':mod:`.{m}`' not in doc]
+    assert not problems, '\n'.join(problems)
 
 
 def test_no_command_imports_another_but_the_demo():

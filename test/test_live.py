@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The live core (``core.live.LiveFusion``) on real detections, driven by a fake clock.
+The live core (``core.live.loop.LiveFusion``) on real detections, driven by a fake clock.
 
 The Pose2Sim session (4 cameras, 2 people, OpenPose BODY_25B at 60 fps) goes through the real
 synchroniser and the real ``Fusion``; the steady (arrival) clock and the node clock are plain
@@ -23,10 +23,10 @@ are checked without DDS and without waiting.
 
 import os
 
-from mv3dpose_ros.core.calibration import load_calibration
-from mv3dpose_ros.core.fusion import FusionConfig
-from mv3dpose_ros.core.live import IDLE_STEP_S, LiveFusion, LiveLog
-from mv3dpose_ros.core.sync import SyncConfig
+from mv3dpose_ros.core.fusion.pipeline import FusionConfig
+from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.core.live.loop import IDLE_STEP_S, LiveFusion, LiveLog
+from mv3dpose_ros.core.live.sync import SyncConfig
 from mv3dpose_ros.core.types import NS_PER_S, TrackState
 from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
 import pytest

@@ -31,9 +31,8 @@ import textwrap
 import time
 
 from mv3dpose_ros.testing.processes import NodeProcess
-from mv3dpose_ros.testing.rig import (analyse, drop_table, PANOPTIC_CALIBRATION,
-                                      PANOPTIC_CAMERAS, published_counts, publisher_command,
-                                      RigProbe)
+from mv3dpose_ros.testing.rig import (analyse, drop_table, PANOPTIC_CALIBRATION, PANOPTIC_CAMERAS,
+                                      published_counts, publisher_command, RigProbe)
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

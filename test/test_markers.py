@@ -18,8 +18,7 @@ import math
 
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, Track, TrackState
-from mv3dpose_ros.ros.markers import (MarkerOptions, tracks_to_markers,
-                                      tracks_to_markers_cdr)
+from mv3dpose_ros.ros.markers import MarkerOptions, tracks_to_markers, tracks_to_markers_cdr
 from mv3dpose_ros.ros.messages import message_to_dict
 from mv3dpose_ros.viz.palette import track_rgb
 import numpy as np

@@ -16,9 +16,9 @@
 
 from mv3dpose_msgs.msg import Joint3D, Keypoint2D, Person2D, Person2DArray, TrackedSkeleton
 from mv3dpose_ros.core.types import JointState, Track, TrackState
-from mv3dpose_ros.ros.messages import (InvalidMessage, message_to_dict, msg_to_tracks,
-                                       ns_to_stamp, numpy_to_person2d_array,
-                                       person2d_array_to_numpy, stamp_to_ns, tracks_to_msg)
+from mv3dpose_ros.ros.messages import (InvalidMessage, message_to_dict, msg_to_tracks, ns_to_stamp,
+                                       numpy_to_person2d_array, person2d_array_to_numpy,
+                                       stamp_to_ns, tracks_to_msg)
 import numpy as np
 import pytest
 from std_msgs.msg import Header

@@ -14,8 +14,8 @@
 
 """Live publication rules, public ids and the fixed-lag stream (core.output)."""
 
-from mv3dpose_ros.core.fusion import Fusion
-from mv3dpose_ros.core.output import LiveOutput, TrackPublisher
+from mv3dpose_ros.core.fusion.pipeline import Fusion
+from mv3dpose_ros.core.live.output import LiveOutput, TrackPublisher
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.sim import make_scene
 import numpy as np

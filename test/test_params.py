@@ -23,7 +23,7 @@ own: ``-p``, a second params file, ``bringup --fusion-param`` and launch argumen
 
 import os
 
-from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.sim import make_scene
 import pytest
 import rclpy

@@ -32,8 +32,8 @@ import itertools
 import os
 
 import cv2
-from mv3dpose_ros.core.calibration import load_calibration
-from mv3dpose_ros.core.camera import fundamental_matrix
+from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.core.geometry.camera import fundamental_matrix
 from mv3dpose_ros.pose2d.estimator import open_estimator
 from mv3dpose_ros.pose2d.models import ModelNotFound, resolve_model_path
 import numpy as np
@@ -152,7 +152,7 @@ def _keypoints(est, demo: str) -> dict:
 
 def _assert_three_people_at_every_time_point(est, demo: str) -> dict:
     """Triangulate each time point from the 5 views and from the first 4; return the views."""
-    from mv3dpose_ros.core.fusion import Fusion
+    from mv3dpose_ros.core.fusion.pipeline import Fusion
     views = _keypoints(est, demo)
     for cameras in (CAMERAS, CAMERAS[:4]):
         calib = load_calibration(os.path.join(demo, 'camera_parameters.json'), cameras=cameras)

@@ -492,8 +492,7 @@ def test_frame_source_reads_folders_and_videos(tmp_path):
 
 def test_image_cdr_is_read_in_place():
     from builtin_interfaces.msg import Time
-    from mv3dpose_ros.ros.images import (image_to_numpy, ImageError, numpy_to_image,
-                                         parse_image_cdr)
+    from mv3dpose_ros.ros.images import image_to_numpy, ImageError, numpy_to_image, parse_image_cdr
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Header
     rng = np.random.default_rng(3)

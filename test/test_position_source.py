@@ -24,8 +24,8 @@ import dataclasses
 
 from geometry_msgs.msg import PoseArray
 from mv3dpose_msgs.msg import TrackedSkeleton, TrackedSkeletonArray
-from mv3dpose_ros.core.fusion import Fusion
-from mv3dpose_ros.core.smoothing import FixedLagSmoother, smooth_track_sequence
+from mv3dpose_ros.core.fusion.pipeline import Fusion
+from mv3dpose_ros.core.tracking.smoothing import FixedLagSmoother, smooth_track_sequence
 from mv3dpose_ros.core.types import JointState, PositionSource, TrackState
 from mv3dpose_ros.ros.frames import Headings, pose_array_cdr, root_poses, track_transforms
 from mv3dpose_ros.ros.messages import msg_to_tracks, ns_to_stamp, tracks_to_cdr

@@ -20,7 +20,7 @@ import sys
 
 import cv2
 from mv3dpose_ros.commands.render import render_tracks
-from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 from mv3dpose_ros.io.tracks_jsonl import TracksWriter
 from mv3dpose_ros.ros.bag_convert import jsonl_to_bag

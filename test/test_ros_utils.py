@@ -19,7 +19,7 @@ import math
 import time
 from typing import List, Tuple
 
-from mv3dpose_ros.core.sync import SyncConfig
+from mv3dpose_ros.core.live.sync import SyncConfig
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
                                           RateLimitedLog, TimestampStats, WARN, WindowStats)

@@ -16,8 +16,9 @@
 
 import dataclasses
 
-from mv3dpose_ros.core.smoothing import (FixedLagSmoother, gaussian_smooth, interpolate_gaps,
-                                         JointKalman, smooth_track_sequence)
+from mv3dpose_ros.core.tracking.smoothing import (FixedLagSmoother, gaussian_smooth,
+                                                  interpolate_gaps, JointKalman,
+                                                  smooth_track_sequence)
 from mv3dpose_ros.core.types import JointState, Track, TrackState
 import numpy as np
 import pytest

@@ -18,7 +18,7 @@ from collections import Counter
 import copy
 import random
 
-from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig
+from mv3dpose_ros.core.live.sync import StreamSynchronizer, SyncConfig
 import pytest
 
 MS = 1_000_000

@@ -30,13 +30,13 @@ import types
 
 from geometry_msgs.msg import Quaternion, TransformStamped
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import quaternion_to_matrix
+from mv3dpose_ros.core.geometry.calibration import quaternion_to_matrix
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, Track, TrackState
-from mv3dpose_ros.ros.frames import (body_yaw, camera_from_transform, camera_transforms,
-                                     Headings, optical_frame, pose_array_cdr,
-                                     quaternion_from_yaw, root_pose_array, root_poses,
-                                     track_transforms, yaw_from_quaternion)
+from mv3dpose_ros.ros.frames import (body_yaw, camera_from_transform, camera_transforms, Headings,
+                                     optical_frame, pose_array_cdr, quaternion_from_yaw,
+                                     root_pose_array, root_poses, track_transforms,
+                                     yaw_from_quaternion)
 from mv3dpose_ros.ros.messages import msg_to_tracks, stamp_to_ns
 from mv3dpose_ros.ros.qos import reliable_qos
 from mv3dpose_ros.testing.spin import spin_until

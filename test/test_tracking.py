@@ -14,7 +14,7 @@
 
 """Tracker: gated matching, life cycle, ids, filtered motion, ground-plane fallback."""
 
-from mv3dpose_ros.core.tracking import pose_distance, Tracker, TrackerConfig
+from mv3dpose_ros.core.tracking.tracker import pose_distance, Tracker, TrackerConfig
 from mv3dpose_ros.core.types import TrackState
 import numpy as np
 import pytest

@@ -14,11 +14,11 @@
 
 """Weighted N-view DLT, reprojection gate, left/right swap check, bone-length limits."""
 
-from mv3dpose_ros.core.camera import essential_matrices
+from mv3dpose_ros.core.geometry.camera import essential_matrices
+from mv3dpose_ros.core.geometry.triangulation import (bone_length_limits, bone_outliers, reproject,
+                                                      swap_pairs, swapped_views, triangulate_dlt,
+                                                      triangulate_robust)
 from mv3dpose_ros.core.skeleton import get_layout
-from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, reproject,
-                                             swap_pairs, swapped_views, triangulate_dlt,
-                                             triangulate_robust)
 from mv3dpose_ros.sim.rig import make_rig
 import numpy as np
 import pytest

@@ -21,10 +21,10 @@ tracks killed by one sparse set, a lost track stealing a fresh track's person, d
 unmerged, a root at the origin.
 """
 
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
-from mv3dpose_ros.core.smoothing import JointKalman
-from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig
-from mv3dpose_ros.core.tracking import _concat
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+from mv3dpose_ros.core.live.sync import StreamSynchronizer, SyncConfig
+from mv3dpose_ros.core.tracking.smoothing import JointKalman
+from mv3dpose_ros.core.tracking.tracker import _concat
 from mv3dpose_ros.core.types import JointState, PositionSource, TrackState
 from mv3dpose_ros.sim.detector import DetectorNoise
 from mv3dpose_ros.sim.people import WalkConfig

@@ -15,15 +15,15 @@
 """
 ``mv3dpose calibrate``: a rig's extrinsics from the 2D keypoints of the people moving in it.
 
-Intrinsics come from ``--calibration`` (any format ``core.calibration`` reads; its extrinsics
-give at most the world frame, unless ``--refine``) or, with ``--bag``, from the bag's
+Intrinsics come from ``--calibration`` (any format ``core.geometry.calibration`` reads; its
+extrinsics give at most the world frame, unless ``--refine``) or, with ``--bag``, from the bag's
 CameraInfo where ``--calibration`` is not given. Keypoints come from per-camera OpenPose JSON
 folders (``--poses``, as ``mv3dpose track``) or from a bag of ``Person2DArray`` messages
 (``--bag``, e.g. recorded from the live rig with ``mv3dpose bag record``). The estimation is
-``core.selfcal`` (pairwise person matching and essential matrices, incremental placement,
-bundle adjustment); the world frame is ``--calibration``'s where its extrinsics are credible
-(``--frame auto``: ``core.selfcal.adopt_frame``), else the floor under the people with metres
-from a person height prior.
+``core.selfcal.extrinsics`` (pairwise person matching and essential matrices, incremental
+placement, bundle adjustment); the world frame is ``--calibration``'s where its extrinsics are
+credible (``--frame auto``: ``core.selfcal.extrinsics.adopt_frame``), else the floor under the
+people with metres from a person height prior.
 
 Output: the rig YAML (``-o``) every command and ``fusion_node`` read, a text report printed
 and written beside it (``RIG.report.txt``) and a picture of the rig (``RIG.png``).
@@ -139,9 +139,9 @@ def _intrinsics(args, bag_infos: Dict[str, dict], names: List[str]) -> dict:
     """Return camera -> Camera (intrinsics) from --calibration, else the bag's CameraInfo."""
     import numpy as np
 
-    from mv3dpose_ros.core.calibration import load_calibration
-    from mv3dpose_ros.core.camera import Camera
-    from mv3dpose_ros.core.selfcal import SelfCalError
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
+    from mv3dpose_ros.core.geometry.camera import Camera
+    from mv3dpose_ros.core.selfcal.extrinsics import SelfCalError
 
     given = load_calibration(args.calibration, args.calibration_format) \
         if args.calibration else {}
@@ -172,8 +172,8 @@ def _unmatched_folders(root: str, cameras) -> List[str]:
 
 def load_inputs(args):
     """Return ``(views, intrinsics, layout, given rig)`` or raise a typed error."""
-    from mv3dpose_ros.core.calibration import load_calibration
-    from mv3dpose_ros.core.selfcal import normalise_views, SelfCalError, Settings
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
+    from mv3dpose_ros.core.selfcal.extrinsics import normalise_views, SelfCalError, Settings
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.io.pose_inputs import open_inputs
 
@@ -254,8 +254,9 @@ def report_text(result, args, views, layout: str, picture: Optional[str]) -> str
 
 def run(args) -> int:
     """Calibrate, write the rig, the report and the picture; return the exit code."""
-    from mv3dpose_ros.core.calibration import CalibrationError, save_rig_yaml
-    from mv3dpose_ros.core.selfcal import adopt_frame, ADULT_HEIGHT_M, calibrate, SelfCalError
+    from mv3dpose_ros.core.geometry.calibration import CalibrationError, save_rig_yaml
+    from mv3dpose_ros.core.selfcal.extrinsics import (adopt_frame, ADULT_HEIGHT_M, calibrate,
+                                                      SelfCalError)
 
     prog = 'mv3dpose calibrate'
     try:

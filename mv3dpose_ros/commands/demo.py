@@ -45,7 +45,7 @@ from typing import Dict, List, Optional, Sequence
 from mv3dpose_msgs.msg import TrackedSkeletonArray
 from mv3dpose_ros.commands.bag import play
 from mv3dpose_ros.commands.render import render_tracks
-from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import JointState, TrackState
 from mv3dpose_ros.eval.mot import evaluate_mot

@@ -25,8 +25,8 @@ cameras the way ``mv3dpose track`` matches pose folders (``cam01/`` or ``cam01.m
 calibrated names; without it every folder / video is a camera, named as it is.
 
 With ``-c`` the image size is also compared with the calibration by the rule the live
-``fusion_node`` applies (``core.camera.fit_image_size``): a codec's crop or padding of at most
-``--image-size-tolerance-px`` per dimension (1080 vs 1088) keeps the keypoints, a resize with
+``fusion_node`` applies (``core.geometry.camera.fit_image_size``): a codec's crop or padding of at
+most ``--image-size-tolerance-px`` per dimension (1080 vs 1088) keeps the keypoints, a resize with
 the same aspect ratio scales them into the calibration's pixels; either is printed as a note
 per camera naming the assumption. Any other size is written in image pixels with a warning
 (tracking will be wrong until the calibration or the images are fixed).
@@ -46,7 +46,7 @@ import sys
 from typing import Dict, Iterator, List, Optional, Tuple
 
 import cv2
-from mv3dpose_ros.core.camera import fit_image_size, IMAGE_SIZE_TOLERANCE_PX, ImageFit
+from mv3dpose_ros.core.geometry.camera import fit_image_size, IMAGE_SIZE_TOLERANCE_PX, ImageFit
 from mv3dpose_ros.io.cameras import camera_sources, load_cameras
 from mv3dpose_ros.io.media import frame_key, list_images, read_video, SourceError
 from mv3dpose_ros.io.media import VIDEO_EXTENSIONS, video_fps

@@ -35,8 +35,8 @@ import math
 import sys
 from typing import Dict, List, Optional
 
-from mv3dpose_ros.core.camera import CalibrationError
 from mv3dpose_ros.core.files import atomic_path
+from mv3dpose_ros.core.geometry.camera import CalibrationError
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.sequence import evaluate_run, load_ground_truth, read_hypotheses
 from mv3dpose_ros.io.datasets import DatasetError

@@ -16,24 +16,24 @@
 """
 ``mv3dpose track``: 3D tracks from per-camera OpenPose JSON folders, offline.
 
-Input: a calibration file (any format ``core.calibration`` reads) and a folder ``ROOT`` with
-one sub-folder of OpenPose JSON files per camera, named like the camera (loosely: Pose2Sim's
+Input: a calibration file (any format ``core.geometry.calibration`` reads) and a folder ``ROOT``
+with one sub-folder of OpenPose JSON files per camera, named like the camera (loosely: Pose2Sim's
 ``cam01_json`` is camera ``cam_01``). Frames are matched across cameras by the number in the
 file names; frame ``n`` gets the stamp ``n / fps`` seconds (``round(n * 1e9 / fps)`` ns).
 Every frame goes through ``Fusion.step``, the very code the live ``fusion_node`` runs. Under
 ``--smooth causal`` and ``fixed-lag`` each frame is one set of the node's own live core
-(``core.live.LiveFusion``: ``Fusion.step``, coasting, the publication rules of
-``core.output``), so ``--smooth causal`` writes exactly what ``fusion_node`` publishes on
+(``core.live.loop.LiveFusion``: ``Fusion.step``, coasting, the publication rules of
+``core.live.output``), so ``--smooth causal`` writes exactly what ``fusion_node`` publishes on
 ``~/tracks``, and ``--smooth fixed-lag --lag-frames L`` exactly what it publishes on
 ``~/tracks_smoothed`` with ``smoothed_lag_frames: L``
-(``core.smoothing.FixedLagSmoother``; each frame is written with its own number and stamp,
+(``core.tracking.smoothing.FixedLagSmoother``; each frame is written with its own number and stamp,
 and the last L frames, which the node publishes once L more sets, its idle steps after the
 input stops or a reset come, are flushed at the end).
 ``--smooth none`` writes every track ``Fusion.step`` keeps (internal ids, tentative ones too)
 with the accepted raw triangulations. ``--smooth offline`` (the default for this batch command,
 as in the paper) takes the accepted raw triangulations (not the filtered joints) and applies
-the paper's Gaussian smoothing to whole tracks (``core.smoothing.smooth_track_sequence``)
-after settling the run with hindsight (``core.hindsight.settle_tracks``: fragments of one
+the paper's Gaussian smoothing to whole tracks (``core.tracking.smoothing.smooth_track_sequence``)
+after settling the run with hindsight (``core.tracking.hindsight.settle_tracks``: fragments of one
 person linked into one id, tracks confirmed from their first frame, ghosts and predictions
 after a person's last observation dropped).
 
@@ -103,7 +103,7 @@ def load_fusion_params(path: str) -> dict:
     used. Unknown field names raise ValueError naming them and the file.
     """
     from mv3dpose_ros.core.files import load_yaml, LoadError, read_text
-    from mv3dpose_ros.core.fusion import FusionConfig
+    from mv3dpose_ros.core.fusion.pipeline import FusionConfig
 
     try:
         data = load_yaml(read_text(path, 16 * 1024 * 1024))
@@ -171,7 +171,7 @@ def run_live(live, seq, fps: float, smoothed: bool = False, progress: bool = Fal
     """
     Yield what ``fusion_node`` publishes for ``seq``: ``(frame, stamp, tracks)``.
 
-    Every frame is one set of ``live`` (``core.live.LiveFusion``, the node's own live core:
+    Every frame is one set of ``live`` (``core.live.loop.LiveFusion``, the node's own live core:
     ``Fusion.step``, coasting, the publication policy), stamped as in ``run_fusion``.
     ``smoothed``: its ``~/tracks_smoothed`` (the frames still held at the end flushed), else
     its ``~/tracks``.
@@ -193,13 +193,13 @@ def run_live(live, seq, fps: float, smoothed: bool = False, progress: bool = Fal
 
 def run(args) -> int:
     """Track, write the JSON Lines file, print a summary; return the exit code."""
-    from mv3dpose_ros.core.calibration import CalibrationError
-    from mv3dpose_ros.core.fusion import Fusion, FusionConfig
-    from mv3dpose_ros.core.hindsight import settle_tracks
-    from mv3dpose_ros.core.live import LiveFusion
+    from mv3dpose_ros.core.geometry.calibration import CalibrationError
+    from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+    from mv3dpose_ros.core.tracking.hindsight import settle_tracks
+    from mv3dpose_ros.core.live.loop import LiveFusion
     from mv3dpose_ros.core.skeleton import get_layout
-    from mv3dpose_ros.core.smoothing import smooth_track_sequence
-    from mv3dpose_ros.core.sync import SyncConfig
+    from mv3dpose_ros.core.tracking.smoothing import smooth_track_sequence
+    from mv3dpose_ros.core.live.sync import SyncConfig
     from mv3dpose_ros.core.types import JointState, TrackState
     from mv3dpose_ros.io.tracks_jsonl import TracksWriter
     import numpy as np

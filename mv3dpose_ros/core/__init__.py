@@ -16,24 +16,25 @@
 The algorithm: calibrated multi-view 2D poses in, tracked 3D skeletons out; numpy, no ROS.
 
 The nodes and the offline commands run the same code from here; ``test/test_layout.py`` keeps
-it free of ROS and at the bottom of the import floors.
+it free of ROS and at the bottom of the import floors. One package per stage, each importing
+only the shared modules and the stages below it:
+
+Shared by every stage:
 
 - :mod:`.types`: shared data types (``Track``, ``TrackState``, ``JointState``, ``NS_PER_S``).
-- :mod:`.camera`: pinhole cameras with OpenCV distortion, epipolar geometry, image-size fits.
-- :mod:`.calibration`: every calibration format read into ``{name: Camera}``; rig YAML out.
 - :mod:`.skeleton`: keypoint layouts (joints, bones, left/right) and conversion between them.
+- :mod:`.assignment`: the gated Hungarian assignment that association and tracking share.
 - :mod:`.files`: bounded loaders of untrusted input files and atomic output files.
-- :mod:`.sync`: the N-stream synchroniser grouping per-camera messages by capture stamp.
-- :mod:`.association`: cross-view association of 2D poses (Tanke & Gall, Algorithm 1).
-- :mod:`.triangulation`: multi-view triangulation of the associated person candidates.
-- :mod:`.tracking`: frame-to-frame tracking of 3D poses with a track life cycle.
-- :mod:`.smoothing`: temporal smoothing of joint trajectories, live and offline.
-- :mod:`.fusion`: ``Fusion.step``, the pipeline of the above for one synchronised set.
-- :mod:`.output`: what a live consumer sees of ``Fusion.step`` (publication rules, public ids).
-- :mod:`.live`: the live fusion loop (synchroniser, fusion, publication, idle steps, coasting).
-- :mod:`.hindsight`: batch-only settling of tracks with knowledge of the future.
-- :mod:`.clock_offsets`: each camera's stamp offset against the rig, from arrival delays.
 - :mod:`.diagnostic_keys`: the ``/diagnostics`` names and keys nodes write and benches read.
-- :mod:`.selfcal`: extrinsic calibration of a rig from the keypoints of people walking in it.
-- :mod:`.bundle`: bundle adjustment of camera extrinsics and 3D points.
+
+The stages, lowest first:
+
+1. :mod:`.geometry`: cameras, calibration files, triangulation, bundle adjustment.
+2. :mod:`.tracking`: the tracker, its per-joint filters, offline smoothing and hindsight.
+3. :mod:`.fusion`: association across views and ``Fusion.step`` over one synchronised set.
+   :mod:`.selfcal` (beside it): a rig's extrinsics from the people in it.
+4. :mod:`.live`: the synchroniser, clock offsets, the publication policy and the live loop.
 """
+
+__all__ = ['assignment', 'diagnostic_keys', 'files', 'fusion', 'geometry', 'live', 'selfcal',
+           'skeleton', 'tracking', 'types']

@@ -24,7 +24,7 @@ import os
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 from mv3dpose_ros.io.media import frame_key, IMAGE_EXTENSIONS, list_images, SourceError
 from mv3dpose_ros.io.media import VIDEO_EXTENSIONS
 from mv3dpose_ros.io.openpose import match_camera_names

@@ -20,8 +20,8 @@ Ground-truth loaders for the public multi-view datasets (metres, the calibration
   (integer pixels). Unannotated actors are NaN.
 - Panoptic ``hdPose3d_stage1_coco19``: one JSON per frame (``body3DScene_<frame>.json``) with
   bodies (``id``, ``joints19`` = x, y, z, c in centimetres, y down); ``panoptic19`` joints.
-  Converted with ``core.calibration.PANOPTIC_TO_WORLD`` and ``PANOPTIC_SCALE`` exactly like the
-  Panoptic calibration. Joints with negative confidence are missing (NaN, confidence 0).
+  Converted with ``core.geometry.calibration.PANOPTIC_TO_WORLD`` and ``PANOPTIC_SCALE`` exactly
+  like the Panoptic calibration. Joints with negative confidence are missing (NaN, confidence 0).
 """
 
 from dataclasses import dataclass, field
@@ -30,8 +30,8 @@ import os
 import re
 from typing import List, Tuple
 
-from mv3dpose_ros.core.calibration import PANOPTIC_SCALE, PANOPTIC_TO_WORLD
 from mv3dpose_ros.core.files import load_json, LoadError, read_text
+from mv3dpose_ros.core.geometry.calibration import PANOPTIC_SCALE, PANOPTIC_TO_WORLD
 import numpy as np
 
 #: The Campus evaluation frames used by Belagiannis et al., VoxelPose and others (inclusive).

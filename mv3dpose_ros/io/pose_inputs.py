@@ -25,7 +25,7 @@ from typing import List, Tuple
 
 def open_inputs(args) -> Tuple[dict, object, List[str]]:
     """Load the calibration and index the pose folders; return (cameras, sequence, notes)."""
-    from mv3dpose_ros.core.calibration import load_calibration
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
 

@@ -58,7 +58,7 @@ import threading
 import time
 from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
-from mv3dpose_ros.core.calibration import load_calibration
+from mv3dpose_ros.core.geometry.calibration import load_calibration
 from mv3dpose_ros.ros.memory import with_hugepages
 from mv3dpose_ros.ros.names import camera_topic, check_pattern, RosNameError
 from mv3dpose_ros.ros.params import package_search_dirs, resolve_path

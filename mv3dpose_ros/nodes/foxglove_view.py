@@ -47,7 +47,7 @@ import foxglove
 from foxglove.channels import CompressedImageChannel, SceneUpdateChannel
 from foxglove.messages import CompressedImage as FoxgloveCompressedImage
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
-from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
+from mv3dpose_ros.core.geometry.calibration import load_calibration, rig_metadata
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.io.bag import get_typestore
 from mv3dpose_ros.pose2d.draw import draw_people

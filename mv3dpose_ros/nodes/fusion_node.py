@@ -15,7 +15,7 @@
 """
 fusion_node: N camera streams of ``Person2DArray`` in, tracked 3D skeletons out.
 
-Wiring around the live core (``core.live.LiveFusion``: synchroniser, ``Fusion.step``, the
+Wiring around the live core (``core.live.loop.LiveFusion``: synchroniser, ``Fusion.step``, the
 publication policy, idle steps, coasting and resets, the same object ``mv3dpose track``
 runs): per-camera subscriptions feed it (header stamps only), and the tracks it gives are
 published as ``~/tracks`` (``TrackedSkeletonArray``, stamped with the set's capture time, in
@@ -40,9 +40,9 @@ from typing import Any, Dict, List, Optional, Union
 
 from geometry_msgs.msg import PoseArray
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages, TrackedSkeletonArray
-from mv3dpose_ros.core.camera import CalibrationError
-from mv3dpose_ros.core.fusion import Fusion
-from mv3dpose_ros.core.live import IDLE_STEP_S, LiveFusion, LiveLog, Publication
+from mv3dpose_ros.core.fusion.pipeline import Fusion
+from mv3dpose_ros.core.geometry.camera import CalibrationError
+from mv3dpose_ros.core.live.loop import IDLE_STEP_S, LiveFusion, LiveLog, Publication
 from mv3dpose_ros.core.types import NS_PER_S
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, RateLimitedLog
@@ -53,8 +53,8 @@ from mv3dpose_ros.ros.fusion_diagnostics import FusionStatus
 from mv3dpose_ros.ros.inputs import camera_from_info, CameraInputStats, PersonsInputCheck
 from mv3dpose_ros.ros.log_bridge import RosLogHandler
 from mv3dpose_ros.ros.markers import tracks_to_markers_cdr
-from mv3dpose_ros.ros.messages import (InvalidMessage, ns_to_stamp, skeleton_info_msg,
-                                       stamp_to_ns, tracks_to_cdr)
+from mv3dpose_ros.ros.messages import (InvalidMessage, ns_to_stamp, skeleton_info_msg, stamp_to_ns,
+                                       tracks_to_cdr)
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
@@ -84,7 +84,7 @@ def steady_ns() -> int:
 
 
 class FusionNode(Node):
-    """ROS wiring of ``core.live.LiveFusion``: parameters, topics, diagnostics, calibration."""
+    """ROS wiring of ``core.live.loop.LiveFusion``: parameters, topics, diagnostics, rig."""
 
     def __init__(self, node_name: str = 'fusion_node', **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)

@@ -332,7 +332,7 @@ class ImagePublisher(Node):
         self.camera_info = None
         name = p['camera_name']
         if p['calibration']:
-            from mv3dpose_ros.core.calibration import load_calibration
+            from mv3dpose_ros.core.geometry.calibration import load_calibration
             cameras = load_calibration(p['calibration'])
             if not name:
                 name = next(iter(cameras)) if len(cameras) == 1 else ns_last

@@ -38,8 +38,8 @@ import zipfile
 
 import cv2
 from mv3dpose_ros.io.media import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
-from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec,
-                                        read_sidecar, sha256_file, sidecar_file, size_tag)
+from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec, read_sidecar,
+                                        sha256_file, sidecar_file, size_tag)
 import numpy as np
 
 

@@ -31,8 +31,8 @@ from typing import Any, Callable, Deque, Dict, Optional, Tuple
 
 from mv3dpose_ros.core.types import NS_PER_S
 from mv3dpose_ros.pose2d.auto_rate import GridRate
-from mv3dpose_ros.pose2d.scheduling import (doze_s, frame_period_ns, grid_period_ns,
-                                            grid_selects, missed_windows, on_new_window)
+from mv3dpose_ros.pose2d.scheduling import (doze_s, frame_period_ns, grid_period_ns, grid_selects,
+                                            missed_windows, on_new_window)
 
 _STAMP = {True: struct.Struct('<iI'), False: struct.Struct('>iI')}
 

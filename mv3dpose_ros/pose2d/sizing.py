@@ -28,8 +28,7 @@ from mv3dpose_ros.core.diagnostic_keys import Pose2DKeys as K
 from mv3dpose_ros.pose2d.config import ModelConfig
 from mv3dpose_ros.pose2d.estimator import DEFAULT_SCORE, ModelError
 from mv3dpose_ros.pose2d.models import (fetched_sizes, fit_size, get_spec, ModelNotFound,
-                                        parse_size, pick_precision, resolve_model_path,
-                                        size_tag)
+                                        parse_size, pick_precision, resolve_model_path, size_tag)
 from mv3dpose_ros.pose2d.scheduling import size_ladder
 
 Size = Tuple[int, int]

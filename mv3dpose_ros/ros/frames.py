@@ -39,8 +39,8 @@ import math
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped
-from mv3dpose_ros.core.calibration import matrix_to_quaternion, quaternion_to_matrix
-from mv3dpose_ros.core.camera import CalibrationError, Camera
+from mv3dpose_ros.core.geometry.calibration import matrix_to_quaternion, quaternion_to_matrix
+from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera
 from mv3dpose_ros.core.skeleton import Layout
 from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 from mv3dpose_ros.ros.cdr import CdrWriter

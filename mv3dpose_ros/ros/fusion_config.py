@@ -27,11 +27,11 @@ import math
 import os
 from typing import Dict, List, Sequence, Tuple
 
-from mv3dpose_ros.core.calibration import load_calibration, rig_metadata
-from mv3dpose_ros.core.camera import CalibrationError, Camera, IMAGE_SIZE_TOLERANCE_PX
-from mv3dpose_ros.core.fusion import FusionConfig
+from mv3dpose_ros.core.fusion.pipeline import FusionConfig
+from mv3dpose_ros.core.geometry.calibration import load_calibration, rig_metadata
+from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera, IMAGE_SIZE_TOLERANCE_PX
+from mv3dpose_ros.core.live.sync import SyncConfig
 from mv3dpose_ros.core.skeleton import get_layout, Layout, LAYOUT_NAMES
-from mv3dpose_ros.core.sync import SyncConfig
 from mv3dpose_ros.core.types import NS_PER_S
 from mv3dpose_ros.ros.markers import MarkerOptions
 from mv3dpose_ros.ros.params import resolve_path

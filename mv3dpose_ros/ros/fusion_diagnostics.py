@@ -18,7 +18,7 @@ fusion_node's ``/diagnostics``: camera inputs, synchroniser, tracking, calibrati
 One status per camera input, then the synchroniser, tracking, calibration and clock ones,
 with the figures the node's tests and the benches read.
 
-``FusionStatus`` reads the node's live core (``core.live.LiveFusion``), its per-camera input
+``FusionStatus`` reads the node's live core (``core.live.loop.LiveFusion``), its per-camera input
 statistics (``ros.inputs.CameraInputStats``) and the output windows it keeps (latency,
 processing, output rate); a WARN names what changed since the previous cycle.
 """
@@ -28,7 +28,7 @@ import math
 from typing import Any, Callable, Dict, List, Sequence, Tuple
 
 from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K, FusionStatusNames as N
-from mv3dpose_ros.core.live import LiveFusion
+from mv3dpose_ros.core.live.loop import LiveFusion
 from mv3dpose_ros.core.types import NS_PER_S, TrackState
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
                                           WARN, WindowStats)

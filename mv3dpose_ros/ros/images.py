@@ -292,7 +292,7 @@ def bgr_to_image(bgr: np.ndarray, encoding: str = 'bgr8', header: Optional[Heade
 
 def camera_info_from_camera(camera: Any, header: Optional[Header] = None) -> CameraInfo:
     """
-    Build a ``CameraInfo`` (plumb_bob, raw image) from a ``core.camera.Camera``.
+    Build a ``CameraInfo`` (plumb_bob, raw image) from a ``core.geometry.camera.Camera``.
 
     R is identity and P = [K | 0]: the keypoints refer to the raw, unrectified image.
     """

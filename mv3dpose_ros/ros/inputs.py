@@ -25,7 +25,7 @@ so it can neither stop the node nor reach the tracker. ``camera_from_info`` read
 from collections import Counter
 from typing import Any, Callable, Dict, Optional, Set, Tuple
 
-from mv3dpose_ros.core.camera import CalibrationError, Camera, fit_image_size
+from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera, fit_image_size
 from mv3dpose_ros.core.skeleton import convert_poses, get_layout, Layout, LAYOUT_NAMES
 from mv3dpose_ros.core.types import NS_PER_S
 from mv3dpose_ros.ros.diagnostics import FrequencyStats, TimestampStats

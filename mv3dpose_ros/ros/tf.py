@@ -37,7 +37,7 @@ Parameters (declared here, read once at start):
 import time
 from typing import Any, Dict, List, Mapping, Optional, Sequence
 
-from mv3dpose_ros.core.camera import CalibrationError, Camera
+from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera
 from mv3dpose_ros.core.types import Track
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.frames import (camera_from_transform, camera_transforms, OPTICAL_FRAME,

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from typing import Dict, Mapping, Optional, Tuple
 import warnings
 
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.skeleton import get_layout
 import numpy as np
 

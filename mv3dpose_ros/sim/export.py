@@ -25,7 +25,7 @@ Lines schema, ids = person index, as ``mv3dpose eval --format tracks`` reads).
 import os
 from typing import Dict
 
-from mv3dpose_ros.core.calibration import save_rig_yaml
+from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
 from mv3dpose_ros.io.tracks_jsonl import poses_to_line
 from mv3dpose_ros.sim.scene import Scene

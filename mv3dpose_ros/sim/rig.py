@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import math
 from typing import Dict, Optional, Sequence, Tuple
 
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry.camera import Camera
 import numpy as np
 
 

@@ -27,7 +27,7 @@ detector), so changing the detector noise keeps the same people walking the same
 from dataclasses import dataclass, field
 from typing import Dict, Iterator, List, Optional, Tuple
 
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.sim.detector import detect, DetectorNoise
 from mv3dpose_ros.sim.people import Body, BodyConfig, simulate_people, WalkConfig
 from mv3dpose_ros.sim.rig import make_rig, RigConfig

@@ -23,7 +23,7 @@ and the floor (z = 0) as a line in the side view; unplaced cameras are listed in
 from typing import Mapping, Optional, Sequence
 
 import cv2
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.viz.palette import track_colour
 from mv3dpose_ros.viz.panels import draw_label, View
 import numpy as np

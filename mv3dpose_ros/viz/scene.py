@@ -34,11 +34,11 @@ as a top view and a side view, using only the received primitives.
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
-from foxglove.messages import (Color, Duration, KeyValuePair, LinePrimitive,
-                               LinePrimitiveLineType, Point3, Pose, Quaternion, SceneEntity,
-                               SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate,
-                               SpherePrimitive, TextPrimitive, Timestamp, Vector3)
-from mv3dpose_ros.core.camera import Camera
+from foxglove.messages import (Color, Duration, KeyValuePair, LinePrimitive, LinePrimitiveLineType,
+                               Point3, Pose, Quaternion, SceneEntity, SceneEntityDeletion,
+                               SceneEntityDeletionType, SceneUpdate, SpherePrimitive,
+                               TextPrimitive, Timestamp, Vector3)
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.types import NS_PER_S, Track, TrackState
 from mv3dpose_ros.viz.palette import track_rgb
 from mv3dpose_ros.viz.panels import valid_joints, View

@@ -18,7 +18,7 @@ Temporal smoothing of joint trajectories (paper, step 4), live and offline.
 Live (``JointKalman``): per-joint constant-velocity Kalman filters with measurement noise
 from the triangulation geometry, an innovation gate against single-frame outliers, velocities
 that start at zero, and joints held (not extrapolated) in gaps with growing variance. The
-tracker owns them (``core.tracking``), so track motion comes from the filtered state.
+tracker owns them (``core.tracking.tracker``), so track motion comes from the filtered state.
 
 Fixed lag (``FixedLagSmoother``): each set's tracks re-estimated from the accepted
 observations up to ``lag`` sets later, published that much later with their own stamps.

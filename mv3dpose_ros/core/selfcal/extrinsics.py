@@ -31,8 +31,8 @@ Every joint of one person seen by two cameras at one instant is a correspondence
    one camera in one person).
 4. Cameras are placed incrementally: the best-connected pair from its essential matrix,
    then each next camera by PnP on the triangulated joints, with a bundle adjustment after
-   each (``core.bundle``); a final adjustment over all cameras and joints, observations far
-   off dropped, and adjusted again.
+   each (``core.geometry.bundle``); a final adjustment over all cameras and joints, observations
+   far off dropped, and adjusted again.
 5. World frame: z up along the normal of the floor fitted under the ankles (or the people's
    mean vertical where the ankles span no plane), origin on the floor under the people's mean
    position or a named camera, x along the reference camera's horizontal viewing direction;
@@ -52,8 +52,8 @@ from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
-from mv3dpose_ros.core import bundle
-from mv3dpose_ros.core.camera import Camera
+from mv3dpose_ros.core.geometry import bundle
+from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.skeleton import get_layout, Layout
 import numpy as np
 from scipy.optimize import linear_sum_assignment

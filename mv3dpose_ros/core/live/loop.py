@@ -15,8 +15,8 @@
 """
 The live fusion loop without ROS: what ``fusion_node`` publishes, given what arrives when.
 
-``LiveFusion`` owns the N-stream synchroniser (``core.sync``), ``Fusion`` and the publication
-policy (``core.output.LiveOutput``), and the rules between them that a live stream needs:
+``LiveFusion`` owns the N-stream synchroniser (``core.live.sync``), ``Fusion`` and the publication
+policy (``core.live.output.LiveOutput``), and the rules between them that a live stream needs:
 
 * each synchronised set goes through ``Fusion.step``; a message late for its set updates the
   tracks at its own stamp (``Fusion.update_view``) when ``fusion.view_updates`` is on;
@@ -41,11 +41,11 @@ import logging
 import time
 from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence
 
-from mv3dpose_ros.core.clock_offsets import describe_offset, StampOffsets
-from mv3dpose_ros.core.fusion import Fusion, FusionConfig
-from mv3dpose_ros.core.output import LiveOutput
+from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
+from mv3dpose_ros.core.live.clock_offsets import describe_offset, StampOffsets
+from mv3dpose_ros.core.live.output import LiveOutput
+from mv3dpose_ros.core.live.sync import StreamSynchronizer, SyncConfig, SyncedSet
 from mv3dpose_ros.core.skeleton import get_layout
-from mv3dpose_ros.core.sync import StreamSynchronizer, SyncConfig, SyncedSet
 from mv3dpose_ros.core.types import NS_PER_S, Track, TrackState
 import numpy as np
 

@@ -22,7 +22,7 @@ therefore do not depend on image resolution.
 
 Essential matrices come in one array ``E[a, b]`` (``[C, C, 3, 3]``) with
 ``x_b^T E[a, b] x_a = 0`` for homogeneous normalised points of cameras ``a`` and ``b``, computed
-once per rig (see ``core.camera.essential_matrix``).
+once per rig (see ``core.geometry.camera.essential_matrix``).
 
 Differences from the reference implementation: the cost is computed for all poses, candidates,
 member views and joints in one vectorised expression; over-threshold pairs are removed before
@@ -33,11 +33,8 @@ views and poses with missing joints (even all of them) are handled.
 
 from typing import Optional, Sequence, Tuple
 
+from mv3dpose_ros.core.assignment import gated_assignment
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-
-#: Cost written for infeasible pairs before the Hungarian solve (never accepted).
-_INFEASIBLE = 1e6
 
 
 def epipolar_norm_coefficients(essentials: np.ndarray) -> np.ndarray:
@@ -239,24 +236,3 @@ def associate_stacked(x: np.ndarray, offsets: np.ndarray, essentials: np.ndarray
                     num_k += 1
     members = members[:num_k]
     return members[(members >= 0).sum(axis=1) >= min_views]
-
-
-def gated_assignment(cost: np.ndarray, threshold) -> Tuple[np.ndarray, np.ndarray]:
-    """
-    Match rows to columns by the Hungarian algorithm over the pairs with ``cost < threshold``.
-
-    Pairs at or over the threshold (scalar or broadcastable array; NaN costs never pass) are
-    removed before the solve, not vetoed after it, so an invalid pair never blocks a valid
-    alternative: the solve maximises the number of valid matches, then minimises their cost.
-    Returns ``(rows, cols)`` of the accepted pairs.
-    """
-    feasible = cost < threshold                      # NaN compares False
-    rows, cols = np.nonzero(feasible)
-    r, c = rows.tolist(), cols.tolist()
-    if len(set(r)) == len(r) == len(set(c)):
-        # The feasible pairs are disjoint, so they are the whole solution (the usual case of
-        # well separated people): no solve needed.
-        return rows, cols
-    rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
-    keep = feasible[rows, cols]
-    return rows[keep], cols[keep]

@@ -65,9 +65,9 @@ import re
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import cv2
-from mv3dpose_ros.core.camera import CalibrationError, Camera
 from mv3dpose_ros.core.files import atomic_path, load_json, load_toml, load_yaml, LoadError
 from mv3dpose_ros.core.files import read_text
+from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera
 import numpy as np
 import yaml
 

@@ -28,9 +28,9 @@ tracks start, so one noisy pose does not fork a track. Tracks unobserved for mor
 with a wide gate never takes a person a fresh track follows.
 
 Motion comes from the filtered state, never from raw observations: every track's joints run
-through per-joint Kalman filters (``core.smoothing.JointKalman``, which rejects single-frame
-outliers by an innovation gate), the track's pose is the filtered (held) pose, and its body
-velocity is the inverse-variance mean of the filtered joint velocities. With ``predict`` each
+through per-joint Kalman filters (``core.tracking.smoothing.JointKalman``, which rejects
+single-frame outliers by an innovation gate), the track's pose is the filtered (held) pose, and its
+body velocity is the inverse-variance mean of the filtered joint velocities. With ``predict`` each
 track is moved by that velocity before matching, so walking people stay inside the gate at
 low frame rates (at most ``max_predict_s`` of motion). A pose matched only by the wider
 recovery gate updates the joints (through their own gates) but not the body velocity; a track
@@ -53,8 +53,8 @@ operations whatever the number of people.
 from dataclasses import dataclass, fields
 from typing import Callable, Optional, Union
 
-from mv3dpose_ros.core.association import gated_assignment
-from mv3dpose_ros.core.smoothing import JointKalman, KalmanUpdate
+from mv3dpose_ros.core.assignment import gated_assignment
+from mv3dpose_ros.core.tracking.smoothing import JointKalman, KalmanUpdate
 from mv3dpose_ros.core.types import TrackState
 import numpy as np
 

@@ -32,7 +32,7 @@ from collections import deque
 import dataclasses
 from typing import Deque, Dict, Iterable, List, Optional, Set, Tuple
 
-from mv3dpose_ros.core.smoothing import FixedLagSmoother
+from mv3dpose_ros.core.tracking.smoothing import FixedLagSmoother
 from mv3dpose_ros.core.types import Track, TrackState
 import numpy as np
 

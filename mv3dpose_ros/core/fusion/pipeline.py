@@ -17,12 +17,12 @@ The multi-view fusion pipeline: 2D poses of calibrated cameras in, tracked 3D sk
 
 One ``Fusion.step`` per synchronised set of views runs the whole of Tanke & Gall's method:
 normalise every keypoint once, associate poses across views with cameras taken in a
-wide-angle-first order (``core.association``), triangulate with a reprojection gate, undo
-single-view left/right swaps, reject implausible bones (``core.triangulation``), merge or
-suppress duplicate 3D candidates, and track (``core.tracking``) with per-joint Kalman filters
-(``core.smoothing.JointKalman``) whose measurement variance comes from the geometry: the 2D
-noise per view in normalised units, times the joint's depth in the cameras that saw it,
-squared, divided by their number. The 2D noise is estimated from the data as it comes in
+wide-angle-first order (``core.fusion.association``), triangulate with a reprojection gate, undo
+single-view left/right swaps, reject implausible bones (``core.geometry.triangulation``), merge or
+suppress duplicate 3D candidates, and track (``core.tracking.tracker``) with per-joint Kalman
+filters (``core.tracking.smoothing.JointKalman``) whose measurement variance comes from the
+geometry: the 2D noise per view in normalised units, times the joint's depth in the cameras that
+saw it, squared, divided by their number. The 2D noise is estimated from the data as it comes in
 (``noise_gain`` times a running mean of the per-set median reprojection error, corrected for
 the degrees of freedom of the views), starting from ``measurement_noise_norm``: the filters
 smooth as much as the detector's noise on this rig calls for, on any data set. The live node
@@ -56,15 +56,16 @@ from itertools import accumulate, compress
 import logging
 from typing import Dict, List, Mapping, Optional, Set, Tuple
 
-from mv3dpose_ros.core.association import (associate_stacked, camera_order,
-                                           epipolar_norm_coefficients, gated_assignment)
-from mv3dpose_ros.core.camera import Camera, essential_matrices
+from mv3dpose_ros.core.assignment import gated_assignment
+from mv3dpose_ros.core.fusion.association import (associate_stacked, camera_order,
+                                                  epipolar_norm_coefficients)
+from mv3dpose_ros.core.geometry.camera import Camera, essential_matrices
+from mv3dpose_ros.core.geometry.triangulation import (bone_length_limits, bone_outliers, dlt_basis,
+                                                      swap_pairs, swapped_views,
+                                                      triangulate_robust, Triangulation)
 from mv3dpose_ros.core.skeleton import get_layout, Layout
-from mv3dpose_ros.core.tracking import (centroid, median_joint_distance, Tracker, TrackerConfig,
-                                        Tracks)
-from mv3dpose_ros.core.triangulation import (bone_length_limits, bone_outliers, dlt_basis,
-                                             swap_pairs, swapped_views, triangulate_robust,
-                                             Triangulation)
+from mv3dpose_ros.core.tracking.tracker import (centroid, median_joint_distance, Tracker,
+                                                TrackerConfig, Tracks)
 from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 import numpy as np
 

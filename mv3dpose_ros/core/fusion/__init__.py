@@ -1,0 +1,22 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Stage 3, fusion: one synchronised set of 2D views in, the rig's tracks out.
+
+- :mod:`.association`: cross-view association of 2D poses (Tanke & Gall, Algorithm 1).
+- :mod:`.pipeline`: ``Fusion.step``, association, triangulation and tracking of one set.
+"""
+
+__all__ = ['association', 'pipeline']

@@ -1,0 +1,24 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Stage 4, live: streams that arrive when they arrive, fused and published.
+
+- :mod:`.sync`: the N-stream synchroniser grouping per-camera messages by capture stamp.
+- :mod:`.clock_offsets`: each camera's stamp offset against the rig, from arrival delays.
+- :mod:`.output`: what a live consumer sees of ``Fusion.step`` (publication rules, public ids).
+- :mod:`.loop`: the live fusion loop (synchroniser, fusion, publication, idle steps, coasting).
+"""
+
+__all__ = ['clock_offsets', 'loop', 'output', 'sync']
