@@ -25,6 +25,7 @@ import os
 
 from mv3dpose_ros.core.fusion.pipeline import FusionConfig
 from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.core.live.config import complete_live_config
 from mv3dpose_ros.core.live.loop import IDLE_STEP_S, LiveFusion, LiveLog
 from mv3dpose_ros.core.live.sync import SyncConfig
 from mv3dpose_ros.core.types import NS_PER_S, TrackState
@@ -263,3 +264,30 @@ def test_a_camera_stamped_20_ms_late_at_10_hz_is_named_with_its_offset(pose2sim)
                for line in notes.lines), notes.lines
     others = [c for c in cameras if c != late]
     assert all(abs(live.stamp_offsets.offsets_s()[c]) < 0.005 for c in others)
+
+
+def test_a_camera_alone_needs_view_updates_so_min_views_becomes_two():
+    """Without single-view updates a one-camera set updates nothing: 2 views, with a warning."""
+    sync, fusion = SyncConfig(min_views=1), FusionConfig(view_updates=False)
+    done_sync, done_fusion, warnings = complete_live_config(sync, fusion, sim_time=False)
+    assert done_sync.min_views == 2 and done_fusion == fusion
+    assert warnings == ['sync.min_views 1 needs fusion.view_updates: using 2']
+    assert sync.min_views == 1                       # what was passed in is left as it was
+    kept, _, quiet = complete_live_config(sync, FusionConfig(), sim_time=False)
+    assert kept.min_views == 1 and not quiet and kept.stream_ahead_check
+
+
+def test_sim_time_turns_the_arrival_clock_checks_off():
+    """Under sim time stamps follow /clock: no stream-ahead check, no offset warning."""
+    sync = SyncConfig()
+    done, _, warnings = complete_live_config(sync, FusionConfig(), sim_time=True)
+    assert not done.stream_ahead_check and done.offset_warn_fraction == 0.0 and not warnings
+    assert sync.stream_ahead_check and sync.offset_warn_fraction == 0.1
+
+
+def test_a_config_that_cannot_work_is_refused_naming_the_field():
+    """Both configs are validated before anything is completed."""
+    with pytest.raises(ValueError, match='max_wait_s'):
+        complete_live_config(SyncConfig(max_wait_s=-1.0), FusionConfig(), sim_time=False)
+    with pytest.raises(ValueError, match='min_views'):
+        complete_live_config(SyncConfig(), FusionConfig(min_views=1), sim_time=False)

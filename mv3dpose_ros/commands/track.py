@@ -196,6 +196,7 @@ def run(args) -> int:
     from mv3dpose_ros.core.geometry.calibration import CalibrationError
     from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
     from mv3dpose_ros.core.tracking.hindsight import settle_tracks
+    from mv3dpose_ros.core.live.config import complete_live_config
     from mv3dpose_ros.core.live.loop import LiveFusion
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.core.tracking.smoothing import smooth_track_sequence
@@ -222,7 +223,10 @@ def run(args) -> int:
         live = fusion = None
         lag = args.lag_frames if args.smooth == 'fixed-lag' else 0
         if args.smooth in ('causal', 'fixed-lag'):     # fusion_node's live core
-            live = LiveFusion(list(cameras), layout, SyncConfig(), config, lag=lag)
+            # Frames are sets already (step_set): their stamps follow no arrival clock, as
+            # under sim time, and what completing changes concerns only the synchroniser.
+            sync, config, _ = complete_live_config(SyncConfig(), config, sim_time=True)
+            live = LiveFusion(list(cameras), layout, sync, config, lag=lag)
             live.start(cameras)
         else:
             fusion = Fusion(cameras, layout.name, config)

@@ -198,7 +198,7 @@ class FusionNode(Node):
         self.config_warnings, self.rig_path = setup.warnings, setup.rig_path
         self.camera_ids, self.layout, self.world_frame = (setup.camera_ids, setup.layout,
                                                           setup.world_frame)
-        self.sync_config, self.fusion_config = p.sync, p.fusion
+        self.sync_config, self.fusion_config = setup.sync, setup.fusion   # completed
         self.max_persons = p.limits.max_persons
         self.inputs = PersonsInputCheck(
             setup.rig, self.layout, self.rig_path, p.limits.max_persons,

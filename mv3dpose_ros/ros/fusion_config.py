@@ -18,8 +18,10 @@ fusion_node's parameters as config dataclasses, and the checks that make them a 
 ``FusionNodeParams`` is the single source of the node's parameter names, defaults and
 descriptions (each field's trailing comment; ``ros.params.declare_config`` declares them,
 fields marked ``dynamic`` may change at run time). ``check_setup`` turns the values into a
-``FusionSetup``: the rig loaded, the cameras, layout and limits checked, and every problem
-that prevents the node from starting raised as ``ConfigError`` naming the parameter.
+``FusionSetup``: the rig loaded, the cameras, layout and limits checked, the sync and fusion
+configs completed by ``core.live.config`` (the parameters themselves are left as read), and
+every problem that prevents the node from starting raised as ``ConfigError`` naming the
+parameter.
 """
 
 from dataclasses import dataclass, field
@@ -30,6 +32,7 @@ from typing import Dict, List, Sequence, Tuple
 from mv3dpose_ros.core.fusion.pipeline import FusionConfig
 from mv3dpose_ros.core.geometry.calibration import load_calibration, rig_metadata
 from mv3dpose_ros.core.geometry.camera import CalibrationError, Camera, IMAGE_SIZE_TOLERANCE_PX
+from mv3dpose_ros.core.live.config import complete_live_config
 from mv3dpose_ros.core.live.sync import SyncConfig
 from mv3dpose_ros.core.skeleton import get_layout, Layout, LAYOUT_NAMES
 from mv3dpose_ros.core.types import NS_PER_S
@@ -147,6 +150,8 @@ class FusionSetup:
     world_frame: str
     max_future_ns: int               # inputs stamped further ahead of the node clock: dropped
     warnings: List[str]
+    sync: SyncConfig                 # p.sync completed for this clock (core.live.config)
+    fusion: FusionConfig             # p.fusion, checked
 
     def summary(self, sync: SyncConfig, sim_time: bool) -> str:
         """Return the line the node logs when it starts."""
@@ -160,7 +165,7 @@ class FusionSetup:
 
 def check_setup(p: FusionNodeParams, sim_time: bool, search_dirs: Sequence[str] = (),
                 warnings: Sequence[str] = ()) -> FusionSetup:
-    """Load the rig and check ``p`` (adjusting ``p.sync`` to sim time); ConfigError if bad."""
+    """Load the rig and check ``p`` (left unchanged: the setup holds the configs to run with)."""
     warnings = list(warnings)
     rig_path = resolve_path(p.rig_config, search_dirs)
     if not p.rig_config:
@@ -195,21 +200,13 @@ def check_setup(p: FusionNodeParams, sim_time: bool, search_dirs: Sequence[str] 
         raise ConfigError(f'intrinsics_source must be rig or camera_info, got '
                           f'{p.intrinsics_source!r}')
     try:
-        p.sync.validate()
-        if sim_time:
-            # A replay's stamps follow /clock, not the arrival clock: judge them there.
-            p.sync.stream_ahead_check = False
-            p.sync.offset_warn_fraction = 0.0      # arrival delays of a replay say nothing
-        p.fusion.validate()
+        sync, fusion, completed = complete_live_config(p.sync, p.fusion, sim_time)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f'parameters: {exc}') from exc
-    if p.sync.min_views < 2 and not p.fusion.view_updates:
-        # A set of one camera only updates tracks through single-view updates.
-        warnings.append('sync.min_views 1 needs fusion.view_updates: using 2')
-        p.sync.min_views = 2
-    if len(ids) < max(2, p.fusion.min_views):
+    warnings += completed
+    if len(ids) < max(2, fusion.min_views):
         raise ConfigError(f'{len(ids)} camera(s) {ids}: fusion needs at least '
-                          f'{max(2, p.fusion.min_views)}')
+                          f'{max(2, fusion.min_views)}')
     lim = p.limits
     if lim.max_persons < 1 or lim.max_message_bytes < 64:
         raise ConfigError(f'limits.max_persons ({lim.max_persons}) must be >= 1 and '
@@ -218,11 +215,11 @@ def check_setup(p: FusionNodeParams, sim_time: bool, search_dirs: Sequence[str] 
     if sim_time:
         # The player publishes /clock with the messages: a stamp further ahead of it than
         # sync.jump_s is an outlier, as the synchroniser judges it on a live clock.
-        max_future_ns = min(max_future_ns, int(p.sync.jump_s * NS_PER_S))
+        max_future_ns = min(max_future_ns, int(sync.jump_s * NS_PER_S))
     if p.smoothed_lag_frames < 0:
         raise ConfigError(f'smoothed_lag_frames must be >= 0, got {p.smoothed_lag_frames}')
     return FusionSetup(rig_path, rig, tuple(ids), layout, p.world_frame or rig_frame or 'map',
-                       max_future_ns, warnings)
+                       max_future_ns, warnings, sync, fusion)
 
 
 def dynamic_value_problem(name: str, value: object) -> str:

@@ -19,6 +19,7 @@ Stage 4, live: streams that arrive when they arrive, fused and published.
 - :mod:`.clock_offsets`: each camera's stamp offset against the rig, from arrival delays.
 - :mod:`.output`: what a live consumer sees of ``Fusion.step`` (publication rules, public ids).
 - :mod:`.loop`: the live fusion loop (synchroniser, fusion, publication, idle steps, coasting).
+- :mod:`.config`: the live configs checked and completed in one place (sim time, min views).
 """
 
-__all__ = ['clock_offsets', 'loop', 'output', 'sync']
+__all__ = ['clock_offsets', 'config', 'loop', 'output', 'sync']
