@@ -43,7 +43,7 @@ from pathlib import Path
 import re
 import tempfile
 import tomllib
-from typing import Any, Iterator, Optional, Union
+from typing import Any, Iterator, Union
 
 import numpy as np
 import yaml
@@ -265,14 +265,3 @@ def atomic_path(output: PathLike) -> Iterator[str]:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-
-
-def is_finite_number(value: Any, limit: Optional[float] = None) -> bool:
-    """Tell whether ``value`` is an int or float (not bool), finite and ``|value| <= limit``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return False
-    try:
-        v = float(value)
-    except OverflowError:
-        return False
-    return math.isfinite(v) and (limit is None or abs(v) <= limit)

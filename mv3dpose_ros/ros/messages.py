@@ -66,13 +66,6 @@ def ns_to_stamp(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def sec_to_stamp(sec: float) -> Time:
-    """Build a ``builtin_interfaces/Time`` from seconds (rounded to the nanosecond)."""
-    if not math.isfinite(sec):
-        return Time()
-    return ns_to_stamp(round(sec * 1e9))
-
-
 # --- 2D people -------------------------------------------------------------------------------
 
 @dataclass
@@ -376,11 +369,6 @@ def _skeleton_msg(f: _TrackFields, j: _JointFields) -> TrackedSkeleton:
                       j.xyz.tolist(), j.confidence.tolist(), j.state.tolist(),
                       j.num_views.tolist(), j.error.tolist(), j.variance.tolist())]
     return msg
-
-
-def track_to_msg(track: Track) -> TrackedSkeleton:
-    """Convert one core ``Track`` to a ``TrackedSkeleton`` (NaN becomes explicit validity)."""
-    return _skeleton_msg(_track_fields(track), _all_joint_fields([track])[0])
 
 
 def tracks_to_msg(tracks: Iterable[Track], header: Header, layout: str) -> TrackedSkeletonArray:

@@ -75,10 +75,6 @@ class Scene:
         for t in range(self.num_frames):
             yield float(self.stamps[t]), self.views[t]
 
-    def project_gt(self, t: int) -> Dict[str, np.ndarray]:
-        """Return the noise-free projections of frame ``t``: camera -> ``[M, J, 2]`` px."""
-        return {name: cam.project(self.gt[t]) for name, cam in self.cameras.items()}
-
     def redetect(self, noise: DetectorNoise, seed: Optional[int] = None) -> 'Scene':
         """Return the same scene seen through another detector model."""
         views, sources = detect(self.cameras, self.gt, self.layout, noise,

@@ -47,12 +47,6 @@ def rotations(rvecs: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
-def rotation_vector(R: np.ndarray) -> np.ndarray:  # noqa: N803
-    """Return the Rodrigues vector of a rotation matrix."""
-    import cv2
-    return cv2.Rodrigues(np.asarray(R, dtype=float))[0].ravel()
-
-
 @dataclass
 class Problem:
     """
