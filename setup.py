@@ -43,7 +43,7 @@ setup(
     entry_points={
         'console_scripts': [
             'mv3dpose = mv3dpose_ros.cli:main',
-            'pose2d_node = mv3dpose_ros.nodes.pose2d_node:main',
+            'pose2d_node = mv3dpose_ros.nodes.pose2d.node:main',
             'fusion_node = mv3dpose_ros.nodes.fusion_node:main',
             'mv3dpose_bringup = mv3dpose_ros.nodes.bringup:main',
             'mv3dpose_image_publisher = mv3dpose_ros.nodes.image_publisher:main',

@@ -79,7 +79,7 @@ def main() -> int:
     from rclpy.parameter import Parameter
     from rclpy.serialization import serialize_message
     from mv3dpose_msgs.msg import Person2DArray
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     from mv3dpose_ros.ros.images import numpy_to_image
     from mv3dpose_ros.ros.messages import ns_to_stamp
     from mv3dpose_ros.ros.qos import reliable_qos

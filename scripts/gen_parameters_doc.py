@@ -61,7 +61,7 @@ NODES: List[Tuple[str, str, str, str, str, str, Dict[str, Any]]] = [
      'mean in practice, and why they are where they are: [design.md](design.md); what '
      '`fusion_node` does with them: [fusion-node.md](fusion-node.md).',
      {'rig_config': os.path.join(ROOT, 'config', 'rigs', 'pose2sim_multiperson.yaml')}),
-    ('pose2d_node', 'mv3dpose_ros.nodes.pose2d_node', 'Pose2DNode', 'config/pose2d.yaml',
+    ('pose2d_node', 'mv3dpose_ros.nodes.pose2d.node', 'Pose2DNode', 'config/pose2d.yaml',
      '/**/pose2d_node',
      'One per camera. The ones that trade speed for accuracy (`model.input_size`, '
      '`model.precision`, `model.providers`, `model.threads`, `model.min_input_side`, '

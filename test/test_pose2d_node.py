@@ -106,7 +106,7 @@ class Probe:
 
 def test_crafted_model_end_to_end(ros_context, tmp_path):
     from mv3dpose_ros.nodes.image_publisher import ImagePublisher
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     model, expected = _crafted_model(tmp_path)
     folder = _image_folder(tmp_path, 3)
     start = int(time.time()) - 1
@@ -225,7 +225,7 @@ def _fake_cache(tmp_path, sizes, int8=()):
 def test_precision_auto_runs_int8_on_the_cpu_and_fp32_on_a_gpu(ros_context, tmp_path,
                                                                monkeypatch):
     """model.precision auto (default): a size's int8 twin where fetched, on the CPU only."""
-    from mv3dpose_ros.nodes import pose2d_node
+    from mv3dpose_ros.nodes.pose2d import node as pose2d_node
     from mv3dpose_ros.pose2d.estimator import CPU
     cache = _fake_cache(tmp_path, [(384, 640), (192, 320)], int8=[(288, 512), (192, 320)])
     node = pose2d_node.Pose2DNode(context=ros_context, namespace='/camprec', parameter_overrides=[
@@ -256,7 +256,7 @@ def test_precision_auto_runs_int8_on_the_cpu_and_fp32_on_a_gpu(ros_context, tmp_
 ])
 def test_input_size_auto_fits_the_first_image(ros_context, tmp_path, image_hw, sizes, chosen):
     """model.input_size auto: the first image picks the fetched size that fits its aspect."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     cache = _fake_cache(tmp_path, sizes)
     node = Pose2DNode(context=ros_context, namespace='/camfit', parameter_overrides=[
         Parameter('model.cache_dir', value=cache), Parameter('model.threads', value=1)])
@@ -279,7 +279,7 @@ def test_input_size_auto_fits_the_first_image(ros_context, tmp_path, image_hw, s
 
 def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
     """Under load, inference_rate_hz auto moves the node to the next fetched smaller input."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     sizes = [(640, 640), (384, 640), (288, 512), (224, 384), (192, 320)]
     cache = _fake_cache(tmp_path, sizes)          # 192x320: not a registry size, still used
     node = Pose2DNode(context=ros_context, namespace='/camladder', parameter_overrides=[
@@ -331,7 +331,7 @@ def test_auto_mode_switches_the_model_along_the_ladder(ros_context, tmp_path):
 @pytest.mark.parametrize('nice', [5, 0])
 def test_inference_thread_yields_the_cpu_to_the_light_work(ros_context, tmp_path, nice):
     """inference_nice: only the inference thread is niced; the executor thread is not."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     cache = _fake_cache(tmp_path, [(384, 640)])
     node = Pose2DNode(context=ros_context, namespace='/camnice', parameter_overrides=[
         Parameter('model.cache_dir', value=cache), Parameter('model.threads', value=1),
@@ -350,7 +350,7 @@ def test_inference_thread_yields_the_cpu_to_the_light_work(ros_context, tmp_path
 
 def test_ctrl_c_is_no_error_of_the_intake_nor_of_the_inference(tmp_path):
     """Ctrl-C: rclpy shuts the context down under the worker; no error, no failed image."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     node = Pose2DNode(context=ctx, namespace='/camint', parameter_overrides=[
@@ -376,12 +376,12 @@ def test_ctrl_c_is_no_error_of_the_intake_nor_of_the_inference(tmp_path):
 
 def test_missing_model_is_a_clear_start_error(tmp_path):
     env = dict(os.environ, MV3DPOSE_MODEL_DIR=str(tmp_path))
-    res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node', '--ros-args',
+    res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d.node', '--ros-args',
                           '-p', 'model.path:=' + str(tmp_path / 'nope.onnx')],
                          capture_output=True, text=True, timeout=60, env=env)
     assert res.returncode == 1
     assert 'model file not found' in res.stdout + res.stderr
-    res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node'],
+    res = subprocess.run([sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d.node'],
                          capture_output=True, text=True, timeout=60, env=env)
     assert res.returncode == 1
     assert 'mv3dpose model fetch --model yolo11n-pose' in res.stdout + res.stderr
@@ -406,7 +406,7 @@ def test_console_processes_with_namespace_and_params_file(ros_context, tmp_path)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(probe.node)
     node = subprocess.Popen(
-        [sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d_node', '--ros-args',
+        [sys.executable, '-m', 'mv3dpose_ros.nodes.pose2d.node', '--ros-args',
          '-r', '__ns:=/cam0', '-r', 'image:=image_raw', '--params-file',
          os.path.join(ROOT, 'config', 'pose2d.yaml'),
          '-p', f'model.path:={model}', '-p', 'model.threads:=1'],
@@ -443,7 +443,7 @@ def test_real_model_on_panoptic_frames(ros_context, shared_data):
     except ModelNotFound as exc:
         pytest.skip(str(exc))
     from mv3dpose_ros.nodes.image_publisher import ImagePublisher
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     demo = os.path.join(shared_data, 'panoptic_demo')
     # image_publisher publishes image_raw, as drivers do; pose2d reads 'image' (remapped)
     params = [
@@ -491,7 +491,7 @@ def test_real_model_on_panoptic_frames(ros_context, shared_data):
 
 
 def test_lifecycle_without_autostart(ros_context, tmp_path):
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     from rclpy.lifecycle import TransitionCallbackReturn
     ok = TransitionCallbackReturn.SUCCESS
     model, _ = _crafted_model(tmp_path)
@@ -516,7 +516,7 @@ def test_lifecycle_without_autostart(ros_context, tmp_path):
 
 def test_a_gpu_model_is_warmed_up_before_the_first_image(ros_context, tmp_path, monkeypatch):
     """A provider other than the CPU runs once on a blank input when opened (faked here)."""
-    from mv3dpose_ros.nodes import pose2d_node
+    from mv3dpose_ros.nodes.pose2d import node as pose2d_node
     from mv3dpose_ros.pose2d.estimator import PoseEstimator
     real_open, real_run, runs = pose2d_node.open_estimator, PoseEstimator.run, []
 
@@ -546,7 +546,7 @@ def test_a_gpu_model_is_warmed_up_before_the_first_image(ros_context, tmp_path, 
 
 def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
     """inference_rate_hz: only the first image of each stamp window reaches the model."""
-    from mv3dpose_ros.nodes.pose2d_node import header_stamp_ns, Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import header_stamp_ns, Pose2DNode
     from rclpy.serialization import serialize_message
     nodes = [Pose2DNode(context=ros_context, namespace=f'/grid{i}', parameter_overrides=[
         Parameter('autostart', value=False), Parameter('inference_rate_hz', value=5.0)])
@@ -591,7 +591,7 @@ def test_inference_rate_grid_keeps_cameras_on_the_same_instants(ros_context):
 
 def test_grid_no_faster_than_the_camera_infers_every_image(ros_context):
     """A grid at the camera's own rate selects nothing: jittered stamps never skip a frame."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     from mv3dpose_ros.pose2d.scheduling import frame_period_ns
     from rclpy.serialization import serialize_message
     node = Pose2DNode(context=ros_context, namespace='/gridfree', parameter_overrides=[
@@ -621,7 +621,7 @@ def test_grid_no_faster_than_the_camera_infers_every_image(ros_context):
 
 def test_grid_mode_counts_a_window_it_never_took_as_dropped(ros_context):
     """Images the grid skips are skipped; a whole window lost while the model was busy dropped."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     from rclpy.serialization import serialize_message
     node = Pose2DNode(context=ros_context, namespace='/gridloss', parameter_overrides=[
         Parameter('autostart', value=False), Parameter('inference_rate_hz', value=2.5)])
@@ -649,7 +649,7 @@ def test_grid_mode_counts_a_window_it_never_took_as_dropped(ros_context):
 
 def test_grid_mode_dozes_until_the_next_window_is_due(ros_context):
     """Between windows the inference thread takes nothing; it wakes half a frame early."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     node = Pose2DNode(context=ros_context, namespace='/doze', parameter_overrides=[
         Parameter('autostart', value=False), Parameter('inference_rate_hz', value=2.0)])
     ms = 1_000_000
@@ -691,7 +691,7 @@ def test_grid_mode_takes_few_images_infers_each_window_first_and_announces_the_r
     Person2DArray follows a SkippedImages (persons_2d/skipped) from the one before (0 first):
     no Person2DArray is stamped inside an announced gap.
     """
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     model, _ = _crafted_model(tmp_path)
     node = Pose2DNode(context=ros_context, namespace='/lazy', cli_args=REMAP,
                       parameter_overrides=[
@@ -743,7 +743,7 @@ def test_grid_mode_takes_few_images_infers_each_window_first_and_announces_the_r
 
 def test_auto_cameras_of_a_rig_follow_the_slowest_announced_rate(tmp_path, ros_context):
     """Two auto-mode nodes announce their rates and take a slower camera's; fixed ones not."""
-    from mv3dpose_ros.nodes.pose2d_node import Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import Pose2DNode
     from std_msgs.msg import Float64
     model, _ = _crafted_model(tmp_path)
     topic = f'/test_rig_rate_{os.getpid()}'
@@ -778,7 +778,7 @@ def test_auto_cameras_of_a_rig_follow_the_slowest_announced_rate(tmp_path, ros_c
 
 
 def test_inference_rate_parameter_accepts_auto_int_and_float(ros_context):
-    from mv3dpose_ros.nodes.pose2d_node import parse_inference_rate, Pose2DNode
+    from mv3dpose_ros.nodes.pose2d.node import parse_inference_rate, Pose2DNode
     assert parse_inference_rate('auto') == -1.0 and parse_inference_rate(-1) == -1.0
     assert parse_inference_rate(1) == 1.0 and parse_inference_rate('2.5') == 2.5
     for bad in ('fast', 1e6, float('nan'), True):

@@ -75,6 +75,12 @@ RESPAWN_MAX_DELAY_S = 30.0
 RESPAWN_STABLE_S = 30.0
 
 
+#: The module each node's console script runs (``python -m`` where the script is not installed).
+MODULES = {'pose2d_node': 'mv3dpose_ros.nodes.pose2d.node',
+           'fusion_node': 'mv3dpose_ros.nodes.fusion_node',
+           'foxglove_view': 'mv3dpose_ros.nodes.foxglove_view'}
+
+
 def _executable(name: str) -> List[str]:
     """Return the command of console script ``name`` (falls back to ``python -m``)."""
     here = os.path.dirname(os.path.abspath(sys.argv[0] or ''))
@@ -82,7 +88,7 @@ def _executable(name: str) -> List[str]:
         path = os.path.join(base, name)
         if base and os.path.isfile(path) and os.access(path, os.X_OK):
             return [path]
-    return [sys.executable, '-m', f'mv3dpose_ros.nodes.{name}']
+    return [sys.executable, '-m', MODULES[name]]
 
 
 def _node_section(docs: Sequence[Dict[str, Any]], node: str) -> Dict[str, Any]:

@@ -35,8 +35,8 @@ dropped). The node is a lifecycle node: the model loads in ``on_configure``, the
 exists while active; ``autostart`` (default true) configures and activates it at start-up.
 
 This is the ROS wiring. Parameters: ``pose2d.config``; logic: ``pose2d.intake``,
-``.scheduling``, ``.auto_rate``, ``.sizing``; ROS parts: ``ros.image_intake``, ``.rig_rate``,
-``.pose2d_diagnostics``.
+``.scheduling``, ``.auto_rate``, ``.sizing``; this node's ROS parts beside it in
+``nodes.pose2d``: ``.image_intake``, ``.rig_rate``, ``.diagnostics``.
 """
 
 import os
@@ -47,6 +47,9 @@ from typing import Any, Callable, List, Optional, Tuple, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
 from mv3dpose_ros.core.skeleton import get_layout
+from mv3dpose_ros.nodes.pose2d.diagnostics import Pose2DStatus
+from mv3dpose_ros.nodes.pose2d.image_intake import ImageIntake
+from mv3dpose_ros.nodes.pose2d.rig_rate import RigRateLink
 from mv3dpose_ros.pose2d.auto_rate import GridRate, RIG_RATE_PERIOD_S
 from mv3dpose_ros.pose2d.config import ModelConfig, parameter_error, Pose2DConfig
 from mv3dpose_ros.pose2d.draw import draw_people
@@ -59,16 +62,13 @@ from mv3dpose_ros.pose2d.scheduling import parse_inference_rate
 from mv3dpose_ros.pose2d.sizing import describe, EstimatorCache
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, RateLimitedLog
-from mv3dpose_ros.ros.image_intake import ImageIntake
 from mv3dpose_ros.ros.images import (decode_image_bytes, ImageError, message_to_numpy,
                                      numpy_to_image)
 from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import (ns_to_stamp, numpy_to_person2d_array, skeleton_info_msg,
                                        stamp_to_ns)
-from mv3dpose_ros.ros.pose2d_diagnostics import Pose2DStatus
 from mv3dpose_ros.ros.qos import describe as describe_qos
 from mv3dpose_ros.ros.qos import latched_qos, publisher_events, reliable_qos, sensor_qos
-from mv3dpose_ros.ros.rig_rate import RigRateLink
 from mv3dpose_ros.ros.spin import spin_until_shutdown
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
