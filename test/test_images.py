@@ -270,30 +270,6 @@ def test_image_publisher_loops_a_video_on_the_instants(tmp_path, ros_context):
         assert round(arr.mean() / 15) == (stamp // 50_000_000) % n, out
 
 
-@pytest.mark.ros
-def test_image_publisher_behind_steps_over_the_frames_of_skipped_instants(tmp_path,
-                                                                          ros_context):
-    """Read in order (no loop), a publisher that fell behind keeps its frames on time."""
-    from mv3dpose_ros.nodes.image_publisher import ImagePublisher
-    from rclpy.parameter import Parameter
-    video = str(tmp_path / 'cam.avi')
-    writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
-    for k in range(6):
-        writer.write(np.full((48, 64, 3), 30 * k, np.uint8))
-    writer.release()
-    pub = ImagePublisher(context=ros_context, namespace='/behind', parameter_overrides=[
-        Parameter('source', value=video)])
-    try:
-        assert pub._next_frame()[0] == 0
-        pub._step_over(3)                               # 3 instants skipped: frames 1-3 too
-        key, frame = pub._next_frame()
-        assert key == 4 and round(frame.mean() / 30) == 4
-        pub._step_over(5)                               # past the end, no loop: the end
-        assert pub._next_frame() is None
-    finally:
-        pub.destroy_node()
-
-
 def _write_video(path, n, step):
     writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))
     for k in range(n):
@@ -307,8 +283,13 @@ def _bounced(slot, n):
     return order[slot % len(order)]
 
 
-def _played(ros_context, source, step, params):
-    """Run an ImagePublisher in this process; return (stamp ns, frame shown) per message."""
+def _played(ros_context, source, step, params, clock=None, stats=None):
+    """
+    Run an ImagePublisher in this process; return (stamp ns, frame shown) per message.
+
+    ``clock`` replaces the node clock (its ``now()`` readings); ``stats`` gets the publisher's
+    ``count`` and ``skipped``.
+    """
     from mv3dpose_ros.nodes.image_publisher import ImagePublisher
     from rclpy.parameter import Parameter
     from rclpy.serialization import deserialize_message
@@ -316,8 +297,12 @@ def _played(ros_context, source, step, params):
         Parameter('source', value=source)] + [Parameter(k, value=v) for k, v in params.items()])
     sent = []
     pub.image_pub.publish = sent.append
+    if clock is not None:
+        pub.get_clock = lambda: clock
     try:
         pub.run()
+        if stats is not None:
+            stats.update(count=pub.count, skipped=pub.skipped)
     finally:
         pub.destroy_node()
     shown = []
@@ -327,6 +312,33 @@ def _played(ros_context, source, step, params):
         shown.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
                       round(arr.mean() / step)))
     return shown
+
+
+class _LateClock:
+    """A node clock whose ``now()`` reads the given instants [ns], one per call."""
+
+    def __init__(self, *instants):
+        self.instants = iter(instants)
+
+    def now(self):
+        from rclpy.time import Time
+        return Time(nanoseconds=next(self.instants))
+
+
+@pytest.mark.ros
+def test_image_publisher_behind_steps_over_the_frames_of_skipped_instants(tmp_path,
+                                                                          ros_context):
+    """Read in order (no loop), a publisher that fell behind keeps its frames on time."""
+    video, period = str(tmp_path / 'cam.avi'), 100_000_000     # 10 Hz
+    _write_video(video, 6, 30)
+    stats = {}
+    # start at 0 (first instant: 1 period), on time, 3 instants late, then 5 instants late
+    shown = _played(ros_context, video, 30, {}, stats=stats,
+                    clock=_LateClock(0, period, 5 * period, 11 * period))
+    # frame 0 on time; 3 instants skipped: frames 1-3 too, frame 4 at its instant; 5 skipped:
+    # past the end, no loop: the end
+    assert shown == [(period, 0), (5 * period, 4)]
+    assert stats == {'count': 2, 'skipped': 8}
 
 
 @pytest.mark.ros
@@ -360,8 +372,8 @@ def test_image_publisher_bounces_a_video_on_the_instants(tmp_path, ros_context):
 
 
 def test_image_publisher_bounce_option_and_frame_order():
-    from mv3dpose_ros.nodes.image_publisher import _parse_cli, ImagePublisher
-    params = {p.name: p.value for p in _parse_cli(['clip.mp4', '--bounce', '--rate', '10'])}
+    from mv3dpose_ros.nodes.image_publisher import ImagePublisher, parse_cli
+    params = {p.name: p.value for p in parse_cli(['clip.mp4', '--bounce', '--rate', '10'])}
     assert params == {'source': 'clip.mp4', 'bounce': True, 'rate_hz': 10.0}
 
     class _Source:
@@ -377,42 +389,37 @@ def test_image_publisher_bounce_option_and_frame_order():
     assert [pub.frame_of(i) for i in range(9)] == [i % 7 for i in range(9)]
 
 
-def test_frame_source_plays_a_video_backward_without_a_seek_per_frame(tmp_path):
+def test_frame_source_plays_a_video_backward_without_a_seek_per_frame(tmp_path, monkeypatch):
     """Bouncing, frames decoded lately are kept (bounded); a frame before them: one seek."""
-    from mv3dpose_ros.nodes.image_publisher import FrameSource
+    from mv3dpose_ros.io.media import FrameSource, VideoReader
     video, n = str(tmp_path / 'clip.avi'), 40
     _write_video(video, n, 6)
     frame_bytes = 48 * 64 * 3
+    seeks, seek = [], VideoReader.seek
+
+    def counted_seek(reader, index):   # counts the seeks of the video
+        seeks.append(index)
+        seek(reader, index)
+
+    monkeypatch.setattr(VideoReader, 'seek', counted_seek)
     src = FrameSource(video, back_bytes=8 * frame_bytes)
-
-    class _Seeks:                      # counts the seeks of the VideoCapture
-        def __init__(self, cap):
-            self.cap, self.count = cap, 0
-
-        def set(self, prop, value):  # noqa: A003 - VideoCapture.set
-            self.count += prop == cv2.CAP_PROP_POS_FRAMES
-            return self.cap.set(prop, value)
-
-        def __getattr__(self, name):
-            return getattr(self.cap, name)
-
-    src._cap = seeks = _Seeks(src._cap)
     order = list(range(n)) + list(range(n - 2, -1, -1)) + list(range(1, n))
     for k in order:
         assert round(src.frame_at(k).mean() / 6) == k
-        assert src._back_used <= 8 * frame_bytes and len(src._back) <= 8
+        assert src.back_bytes_used <= 8 * frame_bytes and len(src.back_frames) <= 8
     # forward: no seek; back from 38: 32-38 kept, then one seek per 8 frames (24-31, .., 0-7);
     # forward again from 0-7 kept, then on from the decoder's position: no seek
-    assert seeks.count == math.ceil((n - 8) / 8), seeks.count
+    assert len(seeks) == math.ceil((n - 8) / 8), seeks
     src.forget(n - 1)
     src.forget(n - 1)                                   # not kept: nothing to drop
-    assert (n - 1) not in src._back and src._back_used == len(src._back) * frame_bytes
+    assert (n - 1) not in src.back_frames
+    assert src.back_bytes_used == len(src.back_frames) * frame_bytes
     # without the buffer (not bouncing), every frame back is a seek
     plain = FrameSource(video)
-    plain._cap = seeks = _Seeks(plain._cap)
+    seeks.clear()
     for k in range(n - 1, -1, -1):
         assert round(plain.frame_at(k).mean() / 6) == k
-    assert seeks.count == n - 1 and not plain._back     # 39 by stepping, then 38 .. 0
+    assert len(seeks) == n - 1 and not plain.back_frames     # 39 by stepping, then 38 .. 0
 
 
 def test_image_publisher_ends_quietly_when_ctrl_c_races_a_publish(tmp_path, capfd):

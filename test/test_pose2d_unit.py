@@ -461,7 +461,7 @@ def test_image_messages_with_row_padding_and_bad_sizes():
 
 
 def test_frame_source_reads_folders_and_videos(tmp_path):
-    from mv3dpose_ros.nodes.image_publisher import FrameSource
+    from mv3dpose_ros.io.media import FrameSource
     frames = [np.full((48, 64, 3), 40 * i, np.uint8) for i in range(4)]
     folder = tmp_path / 'imgs'
     folder.mkdir()
@@ -695,7 +695,7 @@ def test_int8_calibration_frames_come_from_a_folder_a_video_or_a_bag(tmp_path):
 
 def test_a_video_is_indexed_like_a_folder(tmp_path):
     """Looping publishers of a recorded rig show frame k of every camera at the same instant."""
-    from mv3dpose_ros.nodes.image_publisher import FrameSource, VIDEO_SEEK_FRAMES
+    from mv3dpose_ros.io.media import FrameSource, VIDEO_SEEK_FRAMES
     video = str(tmp_path / 'clip.avi')
     n = VIDEO_SEEK_FRAMES + 20
     writer = cv2.VideoWriter(video, cv2.VideoWriter_fourcc(*'MJPG'), 10, (64, 48))

@@ -49,7 +49,7 @@ import cv2
 from mv3dpose_ros.core.geometry.camera import fit_image_size, IMAGE_SIZE_TOLERANCE_PX, ImageFit
 from mv3dpose_ros.io.cameras import camera_sources, load_cameras
 from mv3dpose_ros.io.media import frame_key, list_images, read_video, SourceError
-from mv3dpose_ros.io.media import VIDEO_EXTENSIONS, video_fps
+from mv3dpose_ros.io.media import VIDEO_EXTENSIONS, VideoReader
 from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
 from mv3dpose_ros.pose2d.estimator import ModelError, open_estimator
 from mv3dpose_ros.pose2d.models import ModelNotFound, parse_size, resolve_model_path
@@ -137,14 +137,16 @@ def _frames(path: str) -> Tuple[int, float, Iterator[Tuple[int, str, Optional[np
                 yield frame_key(name) if numbered else i, name, cv2.imread(name,
                                                                            cv2.IMREAD_COLOR)
         return len(files), 0.0, images()
-    cap = cv2.VideoCapture(path)
-    count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
-    cap.release()
+    try:
+        with VideoReader(path) as video:
+            count, fps = video.frame_count, video.fps
+    except SourceError:                 # named when its frames are read
+        count, fps = 0, 0.0
 
-    def video() -> Iterator[Tuple[int, str, Optional[np.ndarray]]]:
+    def frames() -> Iterator[Tuple[int, str, Optional[np.ndarray]]]:
         for i, frame in enumerate(read_video(path)):
             yield i, f'{path} frame {i}', frame
-    return max(0, count), video_fps(path), video()
+    return count, fps, frames()
 
 
 def _estimator(args):

@@ -66,16 +66,14 @@ Every option is also a ROS parameter (``source``, ``rate_hz``, ``loop``, ``bounc
 """
 
 import argparse
-import collections
 import math
-import os
 import struct
 import sys
 import threading
 from typing import Any, Dict, List, Optional, Tuple
 
 import cv2
-from mv3dpose_ros.io.media import IMAGE_EXTENSIONS
+from mv3dpose_ros.io.media import FrameSource
 from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy_to_compressed
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.names import camera_namespace
@@ -93,8 +91,6 @@ PUBLISH_ENCODINGS = ('bgr8', 'rgb8', 'mono8', 'bgra8', 'rgba8', 'mono16', 'yuv42
                      'yuv422_yuy2')
 #: most bytes of serialised messages kept for looping (beyond it frames are re-encoded)
 WIRE_CACHE_BYTES = 512 * 1024 * 1024
-#: a video is stepped forward frame by frame (decoding them) up to this many, else it seeks
-VIDEO_SEEK_FRAMES = 64
 #: most bytes of decoded video frames kept for playing backward (--bounce; frames not cached
 #: as serialised messages): a decoder only seeks to keyframes, so reading a video backward
 #: frame by frame decodes again from the keyframe before each one (0.3-0.5 s for a 1080p frame
@@ -130,176 +126,6 @@ PARAMETERS = {
     'stamp_offset_s': (0.0, 'added to every stamp [s]: a camera host whose clock is off, for '
                             'testing what fusion_node reports'),
 }
-
-
-class FrameSource:
-    """
-    Frames of a folder or a video, in order or by index, as BGR uint8 arrays.
-
-    A video whose container gives its frame count is indexed like a folder (``frame_at``
-    steps forward or seeks), so looping publishers of a recorded rig show frame ``k`` of every
-    camera at the same instant; a stream without a count is read in order. With
-    ``back_bytes`` (played backward, ``--bounce``), the frames of a video that ``frame_at``
-    returned last are kept up to that many bytes, and a frame before them is read with the
-    ones before it in one seek, so going backward seeks once per buffer, not once per frame.
-    """
-
-    def __init__(self, path: str, preload: bool = False, back_bytes: int = 0) -> None:
-        self.path = path
-        self._cap = None
-        self._back_bytes = back_bytes
-        self._back: 'collections.OrderedDict[int, np.ndarray]' = collections.OrderedDict()
-        self._back_used = 0
-        self._frame_nbytes = 0
-        if os.path.isdir(path):
-            self.files = sorted(os.path.join(path, f) for f in os.listdir(path)
-                                if f.lower().endswith(IMAGE_EXTENSIONS))
-            if not self.files:
-                raise ValueError(f'no images ({", ".join(IMAGE_EXTENSIONS)}) in folder {path}')
-        elif os.path.isfile(path):
-            self.files = None
-            self._cap = cv2.VideoCapture(path)
-            if not self._cap.isOpened():
-                raise ValueError(f'cannot open video {path} (not a video OpenCV can read?)')
-        else:
-            raise ValueError(f'source not found: {path!r} (give an image folder or a video)')
-        # frames the video's container reports (0: unknown, e.g. a stream)
-        self._video_frames = 0 if self._cap is None else max(
-            0, int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0))
-        self._index = 0
-        self._cache: Optional[List[np.ndarray]] = None
-        if preload:
-            self._cache = []
-            frame = self._read()
-            while frame is not None:
-                self._cache.append(frame)
-                frame = self._read()
-            self._index = 0
-
-    def _read(self) -> Optional[np.ndarray]:
-        if self.files is not None:
-            if self._index >= len(self.files):
-                return None
-            name = self.files[self._index]
-            self._index += 1
-            image = cv2.imread(name, cv2.IMREAD_COLOR)
-            if image is None:
-                raise ValueError(f'cannot decode image {name}')
-            return image
-        ok, frame = self._cap.read()
-        if not ok:
-            return None
-        self._index += 1
-        self._frame_nbytes = frame.nbytes
-        return frame
-
-    def read_next(self) -> Optional[np.ndarray]:
-        """Return the next frame, or None at the end."""
-        if self._cache is not None:
-            if self._index >= len(self._cache):
-                return None
-            self._index += 1
-            return self._cache[self._index - 1]
-        return self._read()
-
-    @property
-    def seekable(self) -> bool:
-        """Tell whether frames have an index (a folder, a preloaded video, a counted video)."""
-        return self.files is not None or self._cache is not None or self._video_frames > 0
-
-    @property
-    def position(self) -> int:
-        """Return the index of the next frame (seekable sources)."""
-        return self._index
-
-    @property
-    def length(self) -> int:
-        """Return the number of frames of a seekable source."""
-        if self._cache is not None:
-            return len(self._cache)
-        return len(self.files) if self.files is not None else self._video_frames
-
-    def frame_at(self, index: int) -> np.ndarray:
-        """
-        Return frame ``index`` of a seekable source; the next frame is the one after it.
-
-        A frame from the backward buffer (``back_bytes``) leaves the position as it was.
-        """
-        if self._streaming:
-            if index in self._back:              # decoded lately: no seek back
-                self._back.move_to_end(index)
-                return self._back[index]
-            ahead = index - self._index
-            if ahead < 0 and self._back_bytes:
-                return self._read_back(index)
-            if 0 <= ahead <= VIDEO_SEEK_FRAMES:
-                for _ in range(ahead):           # decodes, but cheaper than a seek back
-                    self._cap.grab()
-            else:
-                self._cap.set(cv2.CAP_PROP_POS_FRAMES, index)
-        self._index = index
-        frame = self.read_next()
-        if frame is None and self._streaming and 0 < index < self._video_frames:
-            self._video_frames = index           # the container counted more than it holds
-            return self.frame_at(0)
-        if frame is None:
-            raise ValueError(f'{self.path}: no frame {index}')
-        self._keep(index, frame)
-        return frame
-
-    def _read_back(self, index: int) -> np.ndarray:
-        """Read frame ``index`` of a video behind the decoder, with the frames before it."""
-        fit = max(1, self._back_bytes // max(1, self._frame_nbytes))
-        first = max(0, index - fit + 1)
-        self._cap.set(cv2.CAP_PROP_POS_FRAMES, first)     # decodes from the keyframe before
-        self._index = first
-        for k in range(first, index + 1):
-            frame = self._read()
-            if frame is None:
-                if 0 < k < self._video_frames:
-                    self._video_frames = k       # the container counted more than it holds
-                    return self.frame_at(0)
-                raise ValueError(f'{self.path}: no frame {k}')
-            self._keep(k, frame)
-        return self._back[index]
-
-    def _keep(self, index: int, frame: np.ndarray) -> None:
-        """Keep a decoded video frame for playing backward, dropping the oldest beyond the cap."""
-        if not (self._streaming and self._back_bytes):
-            return
-        self.forget(index)
-        self._back[index] = frame
-        self._back_used += frame.nbytes
-        while self._back_used > self._back_bytes and len(self._back) > 1:
-            self._back_used -= self._back.popitem(last=False)[1].nbytes
-
-    def forget(self, index: int) -> None:
-        """Drop frame ``index`` from the backward buffer (cached elsewhere)."""
-        frame = self._back.pop(index, None)
-        if frame is not None:
-            self._back_used -= frame.nbytes
-
-    @property
-    def _streaming(self) -> bool:
-        """Tell whether frames come from the video file (not preloaded)."""
-        return self._cap is not None and self._cache is None
-
-    def skip(self) -> bool:
-        """Step over the next frame (without converting it); False at the end."""
-        if self._streaming:
-            if self._video_frames and self._index >= self._video_frames or \
-                    not self._cap.grab():
-                return False
-        elif self._index >= self.length:
-            return False
-        self._index += 1
-        return True
-
-    def rewind(self) -> None:
-        """Go back to the first frame."""
-        self._index = 0
-        if self._cap is not None and self._cache is None:
-            self._cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
 
 
 class ImagePublisher(Node):
@@ -526,7 +352,7 @@ class ImagePublisher(Node):
         self.image_pub.publish(wire)
 
 
-def _parse_cli(argv: List[str]) -> List[Parameter]:
+def parse_cli(argv: List[str]) -> List[Parameter]:
     """Turn the convenience options into parameter overrides (--ros-args still work)."""
     parser = argparse.ArgumentParser(prog='mv3dpose_image_publisher',
                                      description=__doc__.splitlines()[1])
@@ -582,7 +408,7 @@ def main(args: Optional[List[str]] = None) -> int:
     """Publish until the source ends (or forever with ``--loop``)."""
     return run_cli_node('image_publisher',
                         lambda overrides: ImagePublisher(parameter_overrides=overrides),
-                        _parse_cli, args, spin=_publish_until_done)
+                        parse_cli, args, spin=_publish_until_done)
 
 
 if __name__ == '__main__':

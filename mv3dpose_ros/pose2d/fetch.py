@@ -37,7 +37,7 @@ from typing import Callable, Iterable, Iterator, List, Optional, Tuple
 import zipfile
 
 import cv2
-from mv3dpose_ros.io.media import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS
+from mv3dpose_ros.io.media import IMAGE_EXTENSIONS, SourceError, VIDEO_EXTENSIONS, VideoReader
 from mv3dpose_ros.pose2d.models import (cache_dir, get_spec, model_file, ModelSpec, read_sidecar,
                                         sha256_file, sidecar_file, size_tag)
 import numpy as np
@@ -375,24 +375,23 @@ def calibration_frames(source: str, limit: int = 64) -> Iterator[np.ndarray]:
 
 
 def _video_frames(path: str, limit: int) -> Iterator[np.ndarray]:
-    cap = cv2.VideoCapture(path)
-    if not cap.isOpened():
-        raise FetchError(f'calibration video {path!r} cannot be opened')
     try:
-        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        video = VideoReader(path)
+    except SourceError:
+        raise FetchError(f'calibration video {path!r} cannot be opened') from None
+    with video:
+        count = video.frame_count
         step = max(1, count // limit) if count > 0 else 1      # no count: the first frames
         taken = index = 0
-        while taken < limit and cap.grab():
+        while taken < limit and video.grab():
             if index % step == 0:
-                ok, frame = cap.retrieve()
-                if not ok:
+                frame = video.retrieve()
+                if frame is None:
                     raise FetchError(f'calibration video {path!r}: frame {index} cannot be '
                                      'decoded')
                 taken += 1
                 yield frame
             index += 1
-    finally:
-        cap.release()
 
 
 def _bag_frames(path: str, limit: int) -> Iterator[np.ndarray]:
