@@ -42,7 +42,7 @@ import time
 
 from mv3dpose_ros import cli
 from mv3dpose_ros.core.geometry.calibration import load_calibration, save_rig_yaml
-from mv3dpose_ros.core.selfcal.extrinsics import align_to, camera_errors
+from mv3dpose_ros.core.selfcal.frame import align_to, camera_errors
 from mv3dpose_ros.eval.sequence import GroundTruth, load_ground_truth
 from mv3dpose_ros.sim.detector import detect, DetectorNoise
 import numpy as np

@@ -30,8 +30,9 @@ from mv3dpose_ros.core.fusion.pipeline import Fusion
 from mv3dpose_ros.core.geometry.calibration import load_calibration, save_rig_yaml
 from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.live.output import LiveOutput
-from mv3dpose_ros.core.selfcal.extrinsics import (align_to, calibrate, camera_errors,
-                                                  normalise_views)
+from mv3dpose_ros.core.selfcal.extrinsics import calibrate
+from mv3dpose_ros.core.selfcal.frame import align_to, camera_errors
+from mv3dpose_ros.core.selfcal.views import normalise_views
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.eval.sequence import evaluate_run, GroundTruth
 from mv3dpose_ros.sim.detector import detect, DetectorNoise

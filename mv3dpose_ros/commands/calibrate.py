@@ -141,7 +141,7 @@ def _intrinsics(args, bag_infos: Dict[str, dict], names: List[str]) -> dict:
 
     from mv3dpose_ros.core.geometry.calibration import load_calibration
     from mv3dpose_ros.core.geometry.camera import Camera
-    from mv3dpose_ros.core.selfcal.extrinsics import SelfCalError
+    from mv3dpose_ros.core.selfcal.views import SelfCalError
 
     given = load_calibration(args.calibration, args.calibration_format) \
         if args.calibration else {}
@@ -173,7 +173,7 @@ def _unmatched_folders(root: str, cameras) -> List[str]:
 def load_inputs(args):
     """Return ``(views, intrinsics, layout, given rig)`` or raise a typed error."""
     from mv3dpose_ros.core.geometry.calibration import load_calibration
-    from mv3dpose_ros.core.selfcal.extrinsics import normalise_views, SelfCalError, Settings
+    from mv3dpose_ros.core.selfcal.views import normalise_views, SelfCalError, Settings
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.io.pose_inputs import open_inputs
 
@@ -255,8 +255,9 @@ def report_text(result, args, views, layout: str, picture: Optional[str]) -> str
 def run(args) -> int:
     """Calibrate, write the rig, the report and the picture; return the exit code."""
     from mv3dpose_ros.core.geometry.calibration import CalibrationError, save_rig_yaml
-    from mv3dpose_ros.core.selfcal.extrinsics import (adopt_frame, ADULT_HEIGHT_M, calibrate,
-                                                      SelfCalError)
+    from mv3dpose_ros.core.selfcal.extrinsics import adopt_frame, calibrate
+    from mv3dpose_ros.core.selfcal.frame import ADULT_HEIGHT_M
+    from mv3dpose_ros.core.selfcal.views import SelfCalError
 
     prog = 'mv3dpose calibrate'
     try:

@@ -15,7 +15,14 @@
 """
 Self-calibration: a rig's extrinsics from the people who walk through it.
 
-- :mod:`.extrinsics`: extrinsic calibration of a rig from the keypoints of people in it.
+The steps, in the order ``extrinsics.calibrate`` runs them:
+
+- :mod:`.views`: keypoints normalised, people followed per view, the input checked; ``Settings``.
+- :mod:`.pairs`: which person is which between two cameras, and the pair's essential matrix.
+- :mod:`.points`: one bundle-adjustment point per joint seen by two cameras or more.
+- :mod:`.placement`: cameras placed one by one and adjusted; odd and bumped cameras found.
+- :mod:`.frame`: the world frame and metric scale; comparing an estimate with a reference rig.
+- :mod:`.extrinsics`: ``calibrate`` (and ``refine``), the conductor over the steps, its report.
 """
 
-__all__ = ['extrinsics']
+__all__ = ['extrinsics', 'frame', 'pairs', 'placement', 'points', 'views']
