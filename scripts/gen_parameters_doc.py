@@ -109,9 +109,8 @@ def _shipped(path: str, section: str) -> Dict[str, Any]:
     """Return the flattened parameters a shipped params file sets for one node section."""
     if not path:
         return {}
-    import yaml
-    with open(os.path.join(ROOT, path), encoding='utf-8') as f:
-        tree = yaml.safe_load(f)[section]['ros__parameters']
+    from mv3dpose_ros.io.params_file import read_params_file
+    tree = read_params_file(os.path.join(ROOT, path))[section]['ros__parameters']
     out: Dict[str, Any] = {}
 
     def walk(prefix: str, d: Dict[str, Any]) -> None:

@@ -102,28 +102,13 @@ def load_fusion_params(path: str) -> dict:
     In a parameter file the first ``ros__parameters`` section with a ``fusion`` mapping is
     used. Unknown field names raise ValueError naming them and the file.
     """
-    from mv3dpose_ros.core.files import load_yaml, LoadError, read_text
     from mv3dpose_ros.core.fusion.pipeline import FusionConfig
+    from mv3dpose_ros.io.params_file import first_section_with, read_params_file
 
-    try:
-        data = load_yaml(read_text(path, 16 * 1024 * 1024))
-    except LoadError as e:
-        raise ValueError(f'{path}: {e}') from None
+    data = read_params_file(path)
     if not isinstance(data, dict):
         raise ValueError(f'{path}: expected a mapping of FusionConfig fields')
-
-    def find(node):
-        if isinstance(node, dict):
-            params = node.get('ros__parameters')
-            if isinstance(params, dict) and isinstance(params.get('fusion'), dict):
-                return params['fusion']
-            for v in node.values():
-                hit = find(v)
-                if hit is not None:
-                    return hit
-        return None
-
-    params = find(data)
+    params = first_section_with(data, 'fusion')
     if params is None:
         params = data
     known = {f.name for f in dataclasses.fields(FusionConfig)}

@@ -18,7 +18,10 @@ Files: bags, datasets, detections, tracks, images and videos; no ROS (rosbags, n
 - :mod:`.bag`: rosbag2 read and write (MCAP, sqlite3) on ``rosbags``: type store, reader, writer,
   checks and salvage.
 - :mod:`.media`: image and video files: the accepted extensions, folder listing by frame
-  number, video frames and rate (``SourceError``).
+  number, the one video reader (``VideoReader``: frames, rate, seeking), a folder or video
+  played by index (``FrameSource``, the image publisher's) (``SourceError``).
+- :mod:`.params_file`: ROS 2 params files read as plain data without rclpy (``mv3dpose track
+  --params``, scripts): their ``ros__parameters`` sections by node key.
 - :mod:`.cameras`: a rig's inputs: the calibration, one image folder or video per camera matched
   to its cameras, and the time points that align their frames.
 - :mod:`.openpose`: OpenPose JSON detections, one folder per camera, one file per frame.
