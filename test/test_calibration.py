@@ -278,7 +278,7 @@ def test_good_minimal_rig(tmp_path):
     (lambda c: c['T_world_cam'].update(rotation=[0, 0, 1]), 'T_world_cam.rotation', '3 values'),
     (lambda c: c['T_world_cam'].update(translation=[0, float('nan'), 1]),
      'T_world_cam.translation', 'NaN'),
-    # issue 11 defect 5: huge values failed inside numpy with an error naming no field
+    # huge values: refused naming the field, not failing inside numpy with an error naming none
     (lambda c: c.update(distortion=[1e300, 0, 0, 0, 0]), 'dist', 'plausible range'),
     (lambda c: c.update(distortion=[10 ** 19, 0, 0, 0, 0]), 'dist', 'plausible range'),
     (lambda c: c.update(K=[1e12, 500, 320, 240]), 'K', 'plausible range'),
@@ -403,7 +403,7 @@ def test_bad_pose2sim(tmp_path, shared_data):
 
 
 def test_hostile_files_fail_fast_naming_the_file(tmp_path):
-    """Issue 11 defect 5: alias bomb, deep nesting and 400-digit numbers in every format."""
+    """An alias bomb, deep nesting and 400-digit numbers, in every format: refused at once."""
     import resource
     import time
     bomb = 'cameras: &a0 [x, x, x, x, x, x, x, x, x]\n' + ''.join(

@@ -69,7 +69,7 @@ def test_read_file_shapes_and_missing_joints(tmp_path):
     ('{"people": [{"pose_keypoints_2d": [1, 2, 1]}]}', 'the layout has 3'),
     ('{"people": [{"pose_keypoints_2d": [1, "a", 1, 1, 1, 1, 1, 1, 1]}]}', 'non-numeric'),
     (b'\xff\xfe\x00', 'not UTF-8'),
-    # issue 11 defect 5: these raised OverflowError / RecursionError (a traceback)
+    # huge numbers and deep nesting: named, never an OverflowError / RecursionError traceback
     ('{"people": [{"pose_keypoints_2d": [' + '9' * 400 + ', 1, 1, 1, 1, 1, 1, 1, 1]}]}',
      'integer with 400 digits'),
     ('{"people": [{"pose_keypoints_2d": ' + '[' * 3000 + ']' * 3000 + '}]}', 'nesting'),

@@ -15,9 +15,9 @@
 """
 A track whose hip is unknown: its root is the body centre, said so on every output.
 
-Issue 25, item 3: ``~/tracks`` (``TrackedSkeleton.position_source``), ``~/poses``, the TF
-frames and the fixed-lag smoother never put such a track at the origin; a track with no
-position at all gets no pose and no frame.
+``~/tracks`` (``TrackedSkeleton.position_source``), ``~/poses``, the TF frames and the
+fixed-lag smoother never put such a track at the origin; a track with no position at all gets
+no pose and no frame.
 """
 
 import dataclasses

@@ -83,8 +83,8 @@ def test_stream_target_and_units():
      'not [x, y, z]'),
     ('{"frame": 1, "tracks": [{"id": 1, "state": "confirmed", "joints": [null], '
      '"confidence": [1, 1]}]}', 'confidence has 2 values'),
-    # defect 5 of issue 11: each of these raised a bare Python exception (a traceback in
-    # every command reading tracks) or was read as garbage
+    # out-of-range, non-numeric, huge and deeply nested values: each named, never a bare
+    # Python exception (a traceback in every command reading tracks) nor read as garbage
     ('{"frame": 1e400, "tracks": []}', '1e400 is out of range'),
     ('{"frame": 1, "stamp": "abc", "tracks": []}', 'stamp .abc. is not a number'),
     ('{"frame": ' + '9' * 400 + ', "tracks": []}', 'integer with 400 digits'),
