@@ -145,15 +145,15 @@ def _node_command(cameras: List[str], params: List[str], fusion_params: Sequence
             cmd += ['--fusion-param', p]
         return cmd
     import yaml
-    from mv3dpose_ros.nodes.bringup import _nest, _parse_assignments, split_threads
-    from mv3dpose_ros.ros.names import camera_namespace
-    values = {'model.threads': split_threads(1), **_parse_assignments(params, '--pose2d-param')}
+    from mv3dpose_ros.nodes.processes import parse_assignments, rig_processes
+    plan = rig_processes([os.path.join(ROOT, 'config', 'pose2d.yaml')], RIG, cameras,
+                         pose2d_params=parse_assignments(params, '--pose2d-param'),
+                         fusion=False)
     over = os.path.join(tmp, 'pose2d.yaml')
     with open(over, 'w') as f:
-        yaml.safe_dump({'/**/pose2d_node': {'ros__parameters': _nest(values)}}, f)
-    ns = camera_namespace(cameras[0])
-    return ['pose2d_node', '--ros-args', '-r', f'__ns:=/{ns}', '-r', f'image:=/{ns}/image_raw',
-            '--params-file', os.path.join(ROOT, 'config', 'pose2d.yaml'), '--params-file', over]
+        yaml.safe_dump(plan.overrides(), f)
+    (pose2d,) = plan.processes
+    return [pose2d.executable] + pose2d.ros_args(plan.params_files + [over])
 
 
 def run(cameras: List[str], rate: float, seconds: float, hold_s: float, provider: str,

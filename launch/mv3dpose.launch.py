@@ -20,9 +20,11 @@ Usage::
     ros2 launch mv3dpose_ros mv3dpose.launch.py rig:=/path/rig.yaml cameras:=cam0,cam1
     ros2 launch mv3dpose_ros mv3dpose.launch.py rig:=rig.yaml image_topic:=/{camera}/image_raw
 
-The same processes and arguments as the ``bringup`` console script (which is what the tests
-run, since ``launch``/``launch_ros`` are not in the PyPI wheels). ``cameras`` empty means every
-camera of the rig. Never imported by the tests.
+The processes are the list ``mv3dpose_ros.nodes.processes.rig_processes`` returns, the one the
+``mv3dpose_bringup`` console script starts (which is what most tests run, since
+``launch``/``launch_ros`` are not in the PyPI wheels); ``test/test_bringup.py`` checks this
+file against that list where ``launch_ros`` is installed. ``cameras`` empty means fusion_node's
+``camera_ids``, else every camera of the rig; ``rig`` empty means its ``rig_config``.
 """
 
 import os
@@ -32,52 +34,40 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+from mv3dpose_ros.nodes.processes import PlanError, rig_processes
+
+#: The launch arguments as the messages of ``rig_processes`` name them.
+LABELS = {'rig': 'rig:=', 'namespace': 'the namespace', 'image_topic': 'image_topic:='}
 
 
 def _nodes(context, *args, **kwargs):
+    def arg(name):
+        return LaunchConfiguration(name).perform(context)
+
     share = get_package_share_directory('mv3dpose_ros')
-    rig = LaunchConfiguration('rig').perform(context)
-    if not rig:
-        raise RuntimeError('set rig:=<rig calibration file>')
-    rig = os.path.abspath(rig)
-    cameras = [c for c in LaunchConfiguration('cameras').perform(context).split(',') if c]
-    if not cameras:
-        from mv3dpose_ros.core.geometry.calibration import load_calibration
-        cameras = list(load_calibration(rig))
-    image_topic = LaunchConfiguration('image_topic').perform(context)
-    sim_time = LaunchConfiguration('use_sim_time').perform(context).lower() == 'true'
-    pose2d_params = LaunchConfiguration('pose2d_params').perform(context) or \
-        os.path.join(share, 'config', 'pose2d.yaml')
-    fusion_params = LaunchConfiguration('fusion_params').perform(context) or \
-        os.path.join(share, 'config', 'fusion.yaml')
-    nodes = []
-    from mv3dpose_ros.ros.names import camera_namespace, camera_topic
-    for cam in cameras:   # {camera} and namespaces: the camera's ROS name (00_03 -> cam00_03)
-        remaps = [('image', camera_topic(image_topic or '/{camera}/image_raw', cam))]
-        nodes.append(Node(
-            package='mv3dpose_ros', executable='pose2d_node', name='pose2d_node',
-            namespace=camera_namespace(cam), output='screen', remappings=remaps,
-            parameters=[pose2d_params, {'camera_id': cam, 'use_sim_time': sim_time}]))
-    nodes.append(Node(
-        package='mv3dpose_ros', executable='fusion_node', name='fusion_node', output='screen',
-        parameters=[fusion_params, {'rig_config': rig, 'camera_ids': cameras,
-                                    'input_topic': '/{camera}/persons_2d',
-                                    'use_sim_time': sim_time}]))
-    port = int(LaunchConfiguration('foxglove_port').perform(context) or 0)
-    if port > 0:          # the live web view (docs/foxglove.md)
-        nodes.append(Node(
-            package='mv3dpose_ros', executable='mv3dpose_foxglove_view', name='foxglove_view',
-            output='screen', parameters=[{'rig_config': rig, 'camera_ids': cameras,
-                                          'port': port, 'use_sim_time': sim_time}]))
-    return nodes
+    files = [arg('pose2d_params') or os.path.join(share, 'config', 'pose2d.yaml'),
+             arg('fusion_params') or os.path.join(share, 'config', 'fusion.yaml')]
+    port = int(arg('foxglove_port') or 0)
+    try:
+        rig = rig_processes(files, arg('rig') or None,
+                            [c for c in arg('cameras').split(',') if c] or None,
+                            image_topic=arg('image_topic') or '/{camera}/image_raw',
+                            foxglove_port=port if port > 0 else None,
+                            use_sim_time=arg('use_sim_time').lower() == 'true', labels=LABELS)
+    except PlanError as exc:
+        raise RuntimeError(f'mv3dpose.launch.py: {exc}') from exc
+    return [Node(**p.launch_kwargs(rig.params_files, rig.common)) for p in rig.processes]
 
 
 def generate_launch_description():
     """Declare the arguments and the nodes."""
     return LaunchDescription([
-        DeclareLaunchArgument('rig', default_value='', description='rig calibration file'),
+        DeclareLaunchArgument('rig', default_value='',
+                              description='rig calibration file (empty: fusion_node '
+                                          'rig_config of the params files)'),
         DeclareLaunchArgument('cameras', default_value='',
-                              description='comma-separated camera ids (empty: all of the rig)'),
+                              description='comma-separated camera ids (empty: fusion_node '
+                                          'camera_ids, else all of the rig)'),
         DeclareLaunchArgument('image_topic', default_value='/{camera}/image_raw',
                               description='image topic per camera ({camera}: the camera ROS '
                                           'name, as mv3dpose_bringup --image-topic)'),

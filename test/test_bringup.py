@@ -15,6 +15,10 @@
 """
 bringup: the plan it derives from one rig, and a real run stopped with SIGINT.
 
+The process list (``nodes.processes``) is what bringup and the launch file both start: the
+launch file is run here with stand-ins for ``launch``/``launch_ros`` (not in the PyPI wheels),
+and against the real ones where they are installed.
+
 The real run uses a crafted constant-output ONNX model (see ``test_pose2d_node``), so no
 model download is needed: images in, ``persons_2d`` per camera, ``tracks`` from fusion.
 """
@@ -26,10 +30,13 @@ import subprocess
 import sys
 import threading
 import time
+import types
 
 from mv3dpose_msgs.msg import Person2DArray, TrackedSkeletonArray
 from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.core.geometry.camera import Camera
+from mv3dpose_ros.nodes.bringup import build_parser, Plan
+from mv3dpose_ros.nodes.processes import PlanError, rig_processes, split_threads
 from mv3dpose_ros.ros.images import numpy_to_image
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.qos import reliable_qos
@@ -42,6 +49,7 @@ from std_msgs.msg import Header
 import yaml
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LAUNCH_FILE = os.path.join(ROOT, 'launch', 'mv3dpose.launch.py')
 W, H = 320, 240
 CAMS = ('cam_a', 'cam_b')
 
@@ -250,3 +258,114 @@ def test_no_fusion_starts_the_pose2d_nodes_only(rig):
     assert started == [f'pose2d_node[{c}]' for c in CAMS]
     res = bringup('--rig', rig, '--no-fusion', '--no-pose2d', '--dry-run')
     assert res.returncode == 2 and 'start nothing' in res.stderr
+
+
+def test_the_process_list_names_each_node_its_script_and_its_module(rig, tmp_path):
+    plan = rig_processes(rig=rig, foxglove_port=8765, pose2d_params={'model.threads': 2})
+    assert [p.name for p in plan.processes] == ['pose2d_node[cam_a]', 'pose2d_node[cam_b]',
+                                                'fusion_node', 'foxglove_view']
+    with open(os.path.join(ROOT, 'setup.py')) as f:
+        scripts = dict(re.findall(r"'(\w+) = ([\w.]+):main'", f.read()))
+    for p in plan.processes:
+        assert scripts[p.executable] == p.module       # the console script runs that module
+    cam_a = plan.processes[0]
+    assert (cam_a.node, cam_a.namespace, cam_a.remaps) == (
+        'pose2d_node', '/cam_a', (('image', '/cam_a/image_raw'),))
+    assert cam_a.parameters == {'model.threads': 2, 'camera_id': 'cam_a'}
+    fusion, view = plan.processes[2:]
+    assert fusion.namespace == '' and fusion.params_key == '/**/fusion_node'
+    assert fusion.parameters == {'rig_config': rig, 'camera_ids': list(CAMS),
+                                 'input_topic': '/{camera}/persons_2d'}
+    assert view.parameters['port'] == 8765 and plan.common == {}
+    assert [p.name for p in rig_processes(rig=rig, pose2d=False).processes] == ['fusion_node']
+    (only,) = rig_processes(rig=rig, cameras=['cam_b'], fusion=False).processes
+    assert only.parameters['model.threads'] == split_threads(1)   # shipped threads: 0
+    (tmp_path / 'empty.yaml').write_text('{}\n')
+    with pytest.raises(PlanError, match='no rig: pass --rig'):
+        rig_processes([str(tmp_path / 'empty.yaml')])
+
+
+def test_bringup_starts_the_process_list(rig):
+    args = build_parser().parse_args(['--rig', rig, '--foxglove', '--use-sim-time'])
+    plan = Plan(args)
+    listed = rig_processes(rig=rig, foxglove_port=8765, use_sim_time=True)
+    commands = plan.commands('over.yaml')
+    assert list(commands) == [p.name for p in listed.processes]
+    for p in listed.processes:
+        argv = commands[p.name]
+        tail = argv[argv.index('--ros-args'):]
+        assert tail == p.ros_args(listed.params_files + ['over.yaml'])
+        assert argv[0].endswith(p.executable) or argv[:3] == [sys.executable, '-m', p.module]
+        assert plan.overrides[p.params_key]['ros__parameters'] == yaml.safe_load(
+            yaml.safe_dump(plan.overrides[p.params_key]['ros__parameters']))
+    assert plan.overrides == listed.overrides()
+    assert plan.overrides['/**']['ros__parameters'] == {'use_sim_time': True}
+
+
+def _launch_stand_ins(monkeypatch):
+    """Put minimal ``launch``/``launch_ros`` modules in place: actions as the plain values."""
+    def module(name, **attrs):
+        mod = types.ModuleType(name)
+        mod.__dict__.update(attrs)
+        monkeypatch.setitem(sys.modules, name, mod)
+
+    class Configuration:
+        def __init__(self, name):
+            self.name = name
+
+        def perform(self, context):
+            return context[self.name]
+
+    module('launch', LaunchDescription=list)
+    module('launch.actions', OpaqueFunction=lambda function: function,
+           DeclareLaunchArgument=lambda name, default_value, description: (
+               name, default_value))
+    module('launch.substitutions', LaunchConfiguration=Configuration)
+    module('launch_ros')
+    module('launch_ros.actions', Node=lambda **kwargs: kwargs)
+
+
+def _load_launch_file():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location('mv3dpose_launch', LAUNCH_FILE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_launch_file_starts_the_process_list(rig, monkeypatch, tmp_path):
+    _launch_stand_ins(monkeypatch)
+    *arguments, nodes = _load_launch_file().generate_launch_description()
+    context = dict(arguments)                    # every argument at its default
+    context.update(rig=rig, foxglove_port='8765', use_sim_time='true')
+    got = nodes(context)
+    files = got[0]['parameters'][:2]             # the shipped ones, from the share directory
+    assert [f.split(os.sep)[-2:] for f in files] == [['config', 'pose2d.yaml'],
+                                                     ['config', 'fusion.yaml']]
+    listed = rig_processes(files, rig, foxglove_port=8765, use_sim_time=True)
+    assert got == [p.launch_kwargs(listed.params_files, {'use_sim_time': True})
+                   for p in listed.processes]
+    assert [n['name'] for n in got] == ['pose2d_node', 'pose2d_node', 'fusion_node',
+                                        'foxglove_view']
+    assert got[0]['namespace'] == '/cam_a' and 'namespace' not in got[2]
+    assert got[0]['parameters'][-1] == {'model': {'threads': split_threads(2)},
+                                        'camera_id': 'cam_a', 'use_sim_time': True}
+    (tmp_path / 'empty.yaml').write_text('{}\n')
+    context.update(rig='', fusion_params=str(tmp_path / 'empty.yaml'))
+    with pytest.raises(RuntimeError, match='no rig: pass rig:='):
+        nodes(context)
+
+
+def test_the_installed_launch_description_starts_the_process_list(rig):
+    pytest.importorskip('launch.actions')              # a full ROS install only
+    pytest.importorskip('launch_ros.actions')
+    from launch import LaunchContext
+    description = _load_launch_file().generate_launch_description()
+    context = LaunchContext()
+    context.launch_configurations['rig'] = rig
+    nodes = []
+    for action in description.entities:       # the arguments take their defaults, then the nodes
+        nodes += action.execute(context) or []
+    listed = rig_processes(rig=rig).processes
+    assert [(n.node_package, n.node_executable) for n in nodes] == [
+        ('mv3dpose_ros', p.executable) for p in listed]

@@ -15,8 +15,10 @@
 """
 bringup: one pose2d_node per camera plus fusion_node, from one rig and one parameter set.
 
-Each node runs as a child process with the same ``--ros-args`` a launch file or ``ros2 run``
-would give it (``-r __ns:=/<camera>``, the params files, then a generated override file).
+The processes, their names, remappings and parameters come from ``nodes.processes``, the
+list ``launch/mv3dpose.launch.py`` starts too. Each node runs as a child process with the same
+``--ros-args`` a launch file or ``ros2 run`` would give it (``-r __ns:=/<camera>``, the params
+files, then a generated override file).
 Child processes rather than one process with a MultiThreadedExecutor, because:
 
 - the GIL: pose2d pre/post-processing and the fusion core are Python/numpy, so N cameras in one
@@ -58,15 +60,14 @@ import threading
 import time
 from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
-from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.nodes.processes import (DEFAULT_IMAGE_TOPIC, DEFAULT_NAMESPACE,
+                                          DEFAULT_PARAMS, parse_assignments, PlanError,
+                                          ProcessSpec, rig_processes)
 from mv3dpose_ros.ros.memory import with_hugepages
-from mv3dpose_ros.ros.names import camera_topic, check_pattern, RosNameError
 from mv3dpose_ros.ros.params import package_search_dirs, resolve_path
 from mv3dpose_ros.ros.shm import clean_stale_files, SHM_DIR, uses_fast_dds
 import yaml
 
-DEFAULT_PARAMS = ('config/pose2d.yaml', 'config/fusion.yaml')
-DEFAULT_IMAGE_TOPIC = '/{camera}/image_raw'
 DDS_PROFILE = 'config/fastdds_shm.xml'
 PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 #: --respawn: first restart delay, its cap, and the uptime after which a node counts as stable
@@ -75,153 +76,39 @@ RESPAWN_MAX_DELAY_S = 30.0
 RESPAWN_STABLE_S = 30.0
 
 
-#: The module each node's console script runs (``python -m`` where the script is not installed).
-MODULES = {'pose2d_node': 'mv3dpose_ros.nodes.pose2d.node',
-           'fusion_node': 'mv3dpose_ros.nodes.fusion_node',
-           'foxglove_view': 'mv3dpose_ros.nodes.foxglove_view'}
-
-
-def _executable(name: str) -> List[str]:
-    """Return the command of console script ``name`` (falls back to ``python -m``)."""
+def _executable(spec: ProcessSpec) -> List[str]:
+    """Return the command of the process's console script (falls back to ``python -m``)."""
     here = os.path.dirname(os.path.abspath(sys.argv[0] or ''))
     for base in (here, *os.environ.get('PATH', '').split(os.pathsep)):
-        path = os.path.join(base, name)
+        path = os.path.join(base, spec.executable)
         if base and os.path.isfile(path) and os.access(path, os.X_OK):
             return [path]
-    return [sys.executable, '-m', MODULES[name]]
-
-
-def _node_section(docs: Sequence[Dict[str, Any]], node: str) -> Dict[str, Any]:
-    """Merge the ros__parameters of every key matching ``node`` (wildcards included)."""
-    out: Dict[str, Any] = {}
-    for doc in docs:
-        for key, section in (doc or {}).items():
-            name = str(key).rstrip('/')
-            if name in ('/**', f'/**/{node}', node, f'/{node}') and isinstance(section, dict):
-                out.update(section.get('ros__parameters', {}) or {})
-    return out
-
-
-def _parse_assignments(items: Sequence[str], what: str) -> Dict[str, Any]:
-    out = {}
-    for item in items:
-        if ':=' not in item:
-            raise SystemExit(f'bringup: {what} {item!r} must look like name:=value')
-        key, raw = item.split(':=', 1)
-        out[key.strip()] = yaml.safe_load(raw) if raw.strip() else ''
-    return out
-
-
-def _nest(flat: Dict[str, Any]) -> Dict[str, Any]:
-    """Turn dotted names into the nested mapping params files use."""
-    out: Dict[str, Any] = {}
-    for key, value in flat.items():
-        node = out
-        parts = key.split('.')
-        for part in parts[:-1]:
-            node = node.setdefault(part, {})
-        node[parts[-1]] = value
-    return out
-
-
-def split_threads(cameras: int, cores: Optional[int] = None) -> int:
-    """
-    Return onnxruntime intra-op threads per pose2d_node: the cores shared among the cameras.
-
-    Each camera's node gets cores // cameras (at least 1), so N nodes do not start N x cores
-    threads that fight over the same cores. Measured in docs/models.md.
-    """
-    if cores is None:
-        try:
-            cores = len(os.sched_getaffinity(0))
-        except AttributeError:
-            cores = os.cpu_count() or 1
-    return max(1, int(cores) // max(1, int(cameras)))
+    return [sys.executable, '-m', spec.module]
 
 
 class Plan:
-    """The processes to start: names, commands and the generated override file's content."""
+    """The processes to start (``nodes.processes``), their commands and their environment."""
 
     def __init__(self, args: argparse.Namespace) -> None:
-        search = [os.getcwd()] + package_search_dirs()
-        self.params_files = [os.path.abspath(resolve_path(p, search))
-                             for p in (args.params_file or DEFAULT_PARAMS)]
-        for p in self.params_files:
-            if not os.path.isfile(p):
-                raise SystemExit(f'bringup: params file {p!r} not found')
-        docs = []
-        for p in self.params_files:
-            with open(p, encoding='utf-8') as f:
-                docs.append(yaml.safe_load(f) or {})
-        fusion = _node_section(docs, 'fusion_node')
-        fusion_over = _parse_assignments(args.fusion_param or [], '--fusion-param')
-        rig = args.rig or fusion_over.get('rig_config') or fusion.get('rig_config')
-        if not rig:
-            raise SystemExit('bringup: no rig: pass --rig or set fusion_node rig_config')
-        self.rig_path = os.path.abspath(resolve_path(rig, search))
         try:
-            rig_cameras = list(load_calibration(self.rig_path))
-        except (OSError, ValueError) as exc:
-            raise SystemExit(f'bringup: cannot load rig {self.rig_path!r}: {exc}')
-        cams = args.cameras or fusion_over.get('camera_ids') or fusion.get('camera_ids') or \
-            rig_cameras
-        unknown = [c for c in cams if c not in rig_cameras]
-        if unknown:
-            raise SystemExit(f'bringup: cameras {unknown} are not in {self.rig_path} '
-                             f'({", ".join(rig_cameras)})')
-        self.cameras = list(cams)
-        ns_pattern = args.namespace
-        # {camera} is the camera's ROS name (ros/names.py: 00_03 -> cam00_03), as in fusion_node.
-        try:
-            check_pattern(ns_pattern, self.cameras, '--namespace')
-            check_pattern(ns_pattern.rstrip('/') + '/persons_2d', self.cameras, '--namespace')
-            if not args.no_pose2d:
-                check_pattern(args.image_topic, self.cameras, '--image-topic')
-        except RosNameError as exc:
+            self.rig = rig_processes(
+                args.params_file or DEFAULT_PARAMS, args.rig, args.cameras, args.namespace,
+                args.image_topic, parse_assignments(args.pose2d_param or [], '--pose2d-param'),
+                parse_assignments(args.fusion_param or [], '--fusion-param'),
+                pose2d=not args.no_pose2d, fusion=not args.no_fusion,
+                foxglove_port=args.foxglove, use_sim_time=args.use_sim_time)
+        except PlanError as exc:
             raise SystemExit(f'bringup: {exc}')
-        self.namespaces = {c: camera_topic(ns_pattern, c) for c in self.cameras}
-        overrides: Dict[str, Any] = {}
-        pose2d_over = _parse_assignments(args.pose2d_param or [], '--pose2d-param')
-        threads = pose2d_over.get('model.threads', (_node_section(docs, 'pose2d_node').get(
-            'model') or {}).get('threads', 0))
-        if not args.no_pose2d and not threads:
-            # 0 = unset: share the cores among the cameras instead of N x all cores.
-            pose2d_over['model.threads'] = split_threads(len(self.cameras))
-        for cam, ns in self.namespaces.items():
-            overrides[f'{ns.rstrip("/")}/pose2d_node'] = {'ros__parameters': _nest(
-                {**pose2d_over, 'camera_id': cam})}
-        fusion_params = {**fusion_over, 'rig_config': self.rig_path,
-                         'camera_ids': self.cameras,
-                         'input_topic': ns_pattern.rstrip('/') + '/persons_2d'}
-        overrides['/**/fusion_node'] = {'ros__parameters': _nest(fusion_params)}
-        if args.foxglove is not None:     # the live web view (nodes/foxglove_view.py)
-            overrides['/**/foxglove_view'] = {'ros__parameters': {
-                'rig_config': self.rig_path, 'camera_ids': list(self.cameras),  # no YAML alias
-                'port': args.foxglove,
-                'detections_topic': ns_pattern.rstrip('/') + '/persons_2d'}}
-        if args.use_sim_time:
-            overrides['/**'] = {'ros__parameters': {'use_sim_time': True}}
-        self.overrides = overrides
-        self.args = args
-        self.env, self.dds_profile = _dds_env(args.dds_profile, search)
+        self.rig_path, self.cameras = self.rig.rig_path, self.rig.cameras
+        self.params_files = self.rig.params_files
+        self.overrides = self.rig.overrides()
+        self.env, self.dds_profile = _dds_env(args.dds_profile,
+                                              [os.getcwd()] + package_search_dirs())
 
     def commands(self, override_file: str) -> Dict[str, List[str]]:
         """Return ``{process name: argv}``."""
-        files = []
-        for p in self.params_files + [override_file]:
-            files += ['--params-file', p]
-        out = {}
-        if not self.args.no_pose2d:
-            for cam, ns in self.namespaces.items():
-                argv = _executable('pose2d_node') + ['--ros-args', '-r', f'__ns:={ns}',
-                                                     '-r', 'image:=' + camera_topic(
-                                                         self.args.image_topic, cam)]
-                out[f'pose2d_node[{cam}]'] = argv + files
-        if not self.args.no_fusion:
-            out['fusion_node'] = _executable('fusion_node') + ['--ros-args'] + files
-        if self.args.foxglove is not None:
-            out['foxglove_view'] = _executable('foxglove_view') + ['--ros-args'] + files
-        return out
+        files = self.params_files + [override_file]
+        return {p.name: _executable(p) + p.ros_args(files) for p in self.rig.processes}
 
 
 def _dds_env(profile: Optional[str], search: Sequence[str]) -> Tuple[Dict[str, str], str]:
@@ -399,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
                    'rig cameras)')
     p.add_argument('--params-file', action='append', help='ROS params file(s) for all nodes '
                    f'(default: {" ".join(DEFAULT_PARAMS)})')
-    p.add_argument('--namespace', default='/{camera}', help='namespace of each camera '
+    p.add_argument('--namespace', default=DEFAULT_NAMESPACE, help='namespace of each camera '
                    "(default '/{camera}'); pose2d publishes <namespace>/persons_2d. {camera} is "
                    'the camera id, or cam<id> when the id is no valid ROS name (00_03 -> '
                    'cam00_03)')
