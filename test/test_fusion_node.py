@@ -635,7 +635,7 @@ def test_set_short_of_a_camera_goes_at_once_when_the_camera_announces_the_skip(
     assert time.monotonic() - t_note < 2.5
     assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[20]
     assert h.node.sync.stats['cam_04'].missing == 1 and h.node.cams['cam_04'].skips == 1
-    assert h.node.sync.decisions['skipped (announced)'] == 1
+    assert h.node.sync.counts.decisions['skipped (announced)'] == 1
     # Frame 21 then completes its set as usual; a skip never covers its own end stamps.
     for cam, msg, _ in stream(scene, t0, [21]):
         h.publish(cam, msg)

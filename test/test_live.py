@@ -258,12 +258,12 @@ def test_a_camera_stamped_20_ms_late_at_10_hz_is_named_with_its_offset(pose2sim)
         for j, (cam, poses) in enumerate(views.items()):
             now = capture + 40_000_000 + j * 1_000_000 + (k * 7919 % 11) * 1_000_000
             live.add(cam, capture + (20_000_000 if cam == late else 0), poses, now, now)
-    assert set(live.clock_suspects) == {late}
-    assert abs(live.clock_suspects[late] - 0.020) < 0.005
+    assert set(live.clocks.suspects) == {late}
+    assert abs(live.clocks.suspects[late] - 0.020) < 0.005
     assert any(f'camera {late}' in line and 'ms later than the rest of the rig' in line
                for line in notes.lines), notes.lines
     others = [c for c in cameras if c != late]
-    assert all(abs(live.stamp_offsets.offsets_s()[c]) < 0.005 for c in others)
+    assert all(abs(live.clocks.offsets.offsets_s()[c]) < 0.005 for c in others)
 
 
 def test_a_camera_alone_needs_view_updates_so_min_views_becomes_two():

@@ -71,7 +71,7 @@ def test_complete_sets_emitted_immediately():
     assert sync.pending() == 0
     assert all(st.used == 5 and st.dropped == 0 and st.missing == 0
                for st in sync.stats.values())
-    assert sync.sets_emitted == 5 and sync.partial_sets == 0
+    assert sync.counts.sets_emitted == 5 and sync.counts.partial_sets == 0
 
 
 def test_no_set_before_last_camera_or_max_wait():
@@ -163,7 +163,7 @@ def test_auto_slop_groups_free_running_cameras_with_phase_offsets():
     out = feed(sync, evs) + sync.flush()
     assert sync.slop_ns == period // 2 and sync.slop_note == ''
     # The first frames (period not known yet) use a 8 ms slop; every later one is complete.
-    assert all(s.complete for s in out[-50:]) and sync.pivots_dropped <= 15
+    assert all(s.complete for s in out[-50:]) and sync.counts.pivots_dropped <= 15
 
 
 def test_half_rate_camera_joins_the_sets_it_has_frames_for_without_delaying_others():
@@ -220,7 +220,7 @@ def test_isolated_outlier_stamp_dropped_counted_without_reset(glitch_s):
     assert not res.accepted and not res.reset and res.kind == 'outlier'
     assert 'sync.jump_s' in res.reason
     out += feed(sync, flat(frames(20)[10:]))
-    assert sync.resets == 0
+    assert sync.counts.resets == 0
     assert len(out) == 20 and all(s.complete for s in out)
     assert sync.stats['cam1'].outliers == 1 and sync.stats['cam1'].dropped == 1
     assert sync.stats['cam1'].lost == 0
@@ -234,7 +234,7 @@ def test_one_stale_message_every_few_frames_never_resets():
         if f % 30 == 29:
             cam = CAMS[(f // 30) % 3]
             feed(sync, [(cam, T0 + (f - 60) * PERIOD, f * PERIOD + LATENCY + MS)])
-    assert sync.resets == 0 and len(out) == 150
+    assert sync.counts.resets == 0 and len(out) == 150
     assert sum(st.outliers for st in sync.stats.values()) == 4
 
 
@@ -251,7 +251,7 @@ def test_sustained_jump_on_two_cameras_resets_and_keeps_the_new_frames():
             res = sync.add(c, back + f * PERIOD, (c, f), arrival)
             out += res.sets
             resets.append(res.reset)
-    assert sync.resets == 1 and sum(resets) == 1
+    assert sync.counts.resets == 1 and sum(resets) == 1
     new = [s for s in out if s.stamp_ns < T0]
     assert [s.stamp_ns for s in new] == [back + f * PERIOD for f in range(10)]
     assert all(s.complete for s in new)
@@ -263,7 +263,7 @@ def test_one_camera_with_a_wrong_clock_is_dropped_not_reset():
     for f in range(30):
         out += feed(sync, [('cam0', T0 + f * PERIOD), ('cam1', T0 + f * PERIOD),
                            ('cam2', T0 + f * PERIOD + 2 * S, f * PERIOD + LATENCY)])
-    assert sync.resets == 0 and len(out) >= 29
+    assert sync.counts.resets == 0 and len(out) >= 29
     assert sync.stats['cam2'].used == 0
     assert sync.held_outliers + sync.stats['cam2'].outliers == 30
 
@@ -298,7 +298,7 @@ def test_too_few_views_pivot_dropped_and_counted():
     later = [(c, T0 + f * PERIOD) for f in range(1, 6) for c in ('cam1', 'cam2')]
     out = feed(sync, [('cam0', T0)] + later)
     assert all(s.stamp_ns != T0 for s in out)
-    assert sync.pivots_dropped >= 1
+    assert sync.counts.pivots_dropped >= 1
     assert sync.stats['cam0'].dropped == 1 and sync.stats['cam0'].used == 0
     assert sync.stats['cam0'].unmatched['too_few_views'] == 1
 
@@ -312,7 +312,7 @@ def test_late_message_dropped_and_counted():
     assert res.kind == 'late' and 'sync.max_wait_s' in res.reason
     st = sync.stats['cam2']
     assert st.late == 1 and st.dropped == 1 and st.received == 6
-    assert sync.resets == 0
+    assert sync.counts.resets == 0
     # Following good messages still form sets.
     assert len(feed(sync, frames(7)[6])) == 1
 
@@ -336,7 +336,7 @@ def test_drops_of_random_frames_every_set_has_min_views():
 def test_small_own_stream_reordering_is_not_a_jump():
     sync = make()
     feed(sync, [('cam0', T0 + 2 * PERIOD), ('cam0', T0 + PERIOD)])
-    assert sync.resets == 0 and sync.pending() == 2
+    assert sync.counts.resets == 0 and sync.pending() == 2
 
 
 def test_memory_bounded_per_camera_by_deciding_early():
@@ -346,7 +346,7 @@ def test_memory_bounded_per_camera_by_deciding_early():
     sync.add('cam2', T0 - PERIOD, 'x', 0)
     out = feed(sync, evs)
     assert sync.pending() <= 2 * 9
-    assert sync.overflow_decisions >= 90 and len(out) >= 90
+    assert sync.counts.overflow_decisions >= 90 and len(out) >= 90
     assert all(s.missing == ('cam2',) for s in out)
 
 
@@ -419,7 +419,7 @@ def test_sustained_forward_jump_of_the_rig_continues_without_reset():
         for c in CAMS:
             arrival += MS
             out += sync.add(c, T0 + f * PERIOD, (c, f), arrival).sets
-    assert sync.resets == 0 and sync.forward_jumps == 1
+    assert sync.counts.resets == 0 and sync.counts.forward_jumps == 1
     assert len(out) == 30 and all(s.complete for s in out)
     assert sum(st.outliers for st in sync.stats.values()) == 0
     assert all(sync.stats[c].lost == skip for c in CAMS)
@@ -441,7 +441,7 @@ def test_cameras_lagging_behind_on_an_overloaded_host_are_late_not_a_reset():
                 out += res.sets
             lag_frame += 1
     assert (139 - lag_frame) * PERIOD > 1.5 * S       # more than jump_s behind at the end
-    assert sync.resets == 0 and sum(st.outliers for st in sync.stats.values()) == 0
+    assert sync.counts.resets == 0 and sum(st.outliers for st in sync.stats.values()) == 0
     assert sync.stats['cam1'].late > 0
 
 
@@ -511,7 +511,7 @@ def test_cameras_lagging_seconds_behind_capture_are_no_outliers():
     sync = StreamSynchronizer(['cam0', 'cam1', 'cam2', 'cam3'],
                               SyncConfig(max_wait_s=0.1, max_wait_cap_s=2.0))
     out = _lagging_rig(sync, 30, 1500 * MS, base=1000 * MS)      # 1.0 s and 2.5 s
-    assert sync.resets == 0 and sync.forward_jumps == 0
+    assert sync.counts.resets == 0 and sync.counts.forward_jumps == 0
     assert sum(st.outliers for st in sync.stats.values()) == 0
     # Only the sets before the wait learned the 1.5 s skew miss the lagging camera.
     assert len(out) >= 28 and sync.stats['cam3'].used >= 26
@@ -535,7 +535,7 @@ def test_detection_delay_varying_by_seconds_between_slow_sets_is_no_outlier():
         assert res.kind != 'outlier', res.reason
         out += res.sets
     out += sync.poll(events[-1][2] + 10 * S)
-    assert sync.resets == 0 and sync.forward_jumps == 0
+    assert sync.counts.resets == 0 and sync.counts.forward_jumps == 0
     assert sum(st.outliers for st in sync.stats.values()) == 0
     # Once the cameras' periods are known (4 steps) and the spread measured, every set is
     # complete; the first ones are lost while the 3.2 s period is unknown.
@@ -597,7 +597,7 @@ def test_announced_skip_lets_a_set_go_when_its_last_real_message_arrives():
     assert feed(sync, [('cam0', stamp, arrival), ('cam1', stamp, arrival + MS)]) == []
     sets = sync.skip('cam2', T0 + 7 * PERIOD, T0 + 9 * PERIOD, arrival + 2 * MS)
     assert [s.missing for s in sets] == [('cam2',)] and sets[0].stamp_ns == stamp
-    assert sync.decisions['skipped (announced)'] == 1
+    assert sync.counts.decisions['skipped (announced)'] == 1
 
 
 def test_announced_skip_before_the_other_results_closes_the_set_on_the_last_of_them():

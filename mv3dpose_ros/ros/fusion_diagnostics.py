@@ -61,7 +61,7 @@ class FusionStatus:
     def inputs(self, now: int, expected_rate_hz: float, silent_warn_ns: int) -> List[Any]:
         """Return one status per camera input (steady clock ``now``)."""
         out = []
-        offsets = self.live.stamp_offsets.offsets_s()
+        offsets = self.live.clocks.offsets.offsets_s()
         for cam in self.camera_ids:
             st = self.cams[cam]
             ss = self.live.sync.stats[cam]
@@ -85,7 +85,7 @@ class FusionStatus:
                       'skip notices rejected': st.skips_rejected,
                       'offset mean (ms)': ss.offset_mean_s * 1e3,
                       'offset jitter (ms)': ss.offset_jitter_s * 1e3,
-                      K.STAMP_OFFSET_MS: self.live.clock_suspects.get(
+                      K.STAMP_OFFSET_MS: self.live.clocks.suspects.get(
                           cam, offsets.get(cam, math.nan)) * 1e3}
             for reason, n in sorted(ss.unmatched.items()):
                 values[f'dropped by sync: {reason}'] = n
@@ -102,9 +102,9 @@ class FusionStatus:
                 level, message = ERROR, st.calibration_problem
             elif level_value(t_level) > level_value(OK):
                 level, message = t_level, t_msg
-            elif cam in self.live.clock_suspects:
+            elif cam in self.live.clocks.suspects:
                 level = WARN
-                message = (f'stamps {self.live.clock_suspects[cam] * 1e3:+.1f} ms off the rest '
+                message = (f'stamps {self.live.clocks.suspects[cam] * 1e3:+.1f} ms off the rest '
                            'of the rig (host clock? chrony / PTP)')
             elif level_value(f_level) > level_value(OK) and expected_rate_hz > 0:
                 level, message = f_level, f_msg
@@ -138,23 +138,24 @@ class FusionStatus:
             'dropped in sync: outlier stamps': sum(x.outliers for x in stats),
             'dropped in sync: too few views': sum(x.unmatched['too_few_views'] for x in stats),
             'dropped in sync: duplicates': sum(x.unmatched['duplicates'] for x in stats),
-            'sets decided early (queue full)': s.overflow_decisions}
+            'sets decided early (queue full)': s.counts.overflow_decisions}
         new = {k: v - self._drops_reported.get(k, 0) for k, v in drops.items()}
         self._drops_reported = drops
-        values = {K.SETS_EMITTED: s.sets_emitted, K.PARTIAL_SETS: s.partial_sets,
-                  'incomplete sets decided on skip notices': s.decisions['skipped (announced)'],
-                  'pivots dropped (too few views)': s.pivots_dropped,
+        sc = s.counts
+        values = {K.SETS_EMITTED: sc.sets_emitted, K.PARTIAL_SETS: sc.partial_sets,
+                  'incomplete sets decided on skip notices': sc.decisions['skipped (announced)'],
+                  'pivots dropped (too few views)': sc.pivots_dropped,
                   'pending messages': s.pending(), 'held outlier messages': s.held_outliers,
                   'slop (ms)': s.slop_ns / 1e6,
                   'max_wait in use (ms)': s.max_wait_ns / 1e6,
                   'arrival spread p95 (ms)': s.spread_p95_s * 1e3,
                   'frame period (ms)': (s.frame_period_ns or math.nan) / 1e6,
                   'resets': counts['resets'],
-                  'forward jumps (no reset)': s.forward_jumps,
+                  'forward jumps (no reset)': sc.forward_jumps,
                   'idle steps (no input)': counts['idle_steps'], **drops}
         changed = {k: v for k, v in new.items() if v > 0}
         level = WARN if changed else OK
-        message = f'{s.sets_emitted} sets, {s.partial_sets} partial'
+        message = f'{sc.sets_emitted} sets, {sc.partial_sets} partial'
         if changed:
             message += '; this cycle: ' + ', '.join(f'{v} {k}' for k, v in changed.items())
         sync_status = make_status(self.name(N.SYNCHRONIZER), level, message, values=values)

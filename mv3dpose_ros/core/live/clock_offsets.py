@@ -33,10 +33,14 @@ other one: either may be the one that is off.
 """
 
 from collections import deque
-from typing import Deque, Dict, List, Optional, Tuple
+from typing import Callable, Deque, Dict, List, Mapping, Optional, Sequence, Tuple
 
+from mv3dpose_ros.core.live.sync_stats import CameraSyncStats
 from mv3dpose_ros.core.types import NS_PER_S
 import numpy as np
+
+#: Least stamp offset [s] worth a warning, whatever the frame period (arrival jitter).
+CLOCK_WARN_FLOOR_S = 0.005
 
 
 class StampOffsets:
@@ -98,6 +102,45 @@ class StampOffsets:
             # others all agree with is not named because of it
             found = [(c, o) for c, o in found if abs(o) >= 0.5 * max(abs(x) for _, x in found)]
         return sorted(found, key=lambda co: -abs(co[1]))
+
+
+class ClockCheck:
+    """The live loop's watch on the camera host clocks: each second, who stands apart, warned."""
+
+    def __init__(self, camera_ids: Sequence[str], stats: Mapping[str, CameraSyncStats],
+                 fraction: float, warn: Callable[[str, str], None]) -> None:
+        self.camera_ids = tuple(camera_ids)
+        self.stats = stats                # the synchroniser's: usual rates, phases in the sets
+        self.fraction = fraction          # sync.offset_warn_fraction (0: off)
+        self.warn = warn                  # (throttle key, text)
+        #: Each camera's stamp offset against the rest of the rig (a host clock that is off).
+        self.offsets = StampOffsets()
+        self.suspects: Dict[str, float] = {}     # camera -> offset [s], beyond the limit
+        self._checked_ns = 0
+
+    def observe(self, camera: str, stamp_ns: int, clock_ns: int) -> None:
+        """Note the message's arrival delay; each second, warn of cameras whose stamps are off."""
+        if self.fraction <= 0.0:
+            return
+        self.offsets.observe(camera, stamp_ns, clock_ns)
+        if clock_ns - self._checked_ns < NS_PER_S:
+            return
+        self._checked_ns = clock_ns
+        stats = self.stats
+        rates = [r for r in (stats[c].usual_rate_hz for c in self.camera_ids) if r > 0]
+        if not rates:
+            return
+        period_s = 1.0 / float(np.median(rates))
+        phases = {c: stats[c].offset_mean_s for c in self.camera_ids}
+        self.suspects = dict(
+            self.offsets.suspects(period_s, self.fraction, CLOCK_WARN_FLOOR_S, phases))
+        for cam, offset_s in self.suspects.items():
+            self.warn(f'{cam}:clock_offset', describe_offset(cam, offset_s, period_s))
+
+    def reset(self) -> None:
+        """Forget the delays and the named cameras (a clock jump, a reset of the stream)."""
+        self.offsets.reset()
+        self.suspects = {}
 
 
 def relative(values: Dict[str, float]) -> Dict[str, float]:

@@ -39,10 +39,10 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 import logging
 import time
-from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Callable, Deque, List, Mapping, Optional, Sequence
 
 from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
-from mv3dpose_ros.core.live.clock_offsets import describe_offset, StampOffsets
+from mv3dpose_ros.core.live.clock_offsets import ClockCheck
 from mv3dpose_ros.core.live.output import LiveOutput
 from mv3dpose_ros.core.live.sync import StreamSynchronizer, SyncConfig, SyncedSet
 from mv3dpose_ros.core.skeleton import get_layout
@@ -60,8 +60,6 @@ IDLE_STEP_S = 0.1
 #: fusion.max_coast_s when sets come slower: an overloaded rig's inference grid (pose2d
 #: inference_rate_hz auto) may give a set every 1-3 s, and its people must keep their tracks.
 COAST_SET_PERIODS = 2.5
-#: Least stamp offset [s] worth a warning, whatever the frame period (arrival jitter).
-CLOCK_WARN_FLOOR_S = 0.005
 
 
 @dataclass
@@ -129,10 +127,10 @@ class LiveFusion:
         self._last_input_ns: Optional[int] = None      # steady clock of the last input
         self._slop_noted = False
         self._out: List[Publication] = []
-        #: Each camera's stamp offset against the rest of the rig (a host clock that is off).
-        self.stamp_offsets = StampOffsets()
-        self.clock_suspects: Dict[str, float] = {}     # camera -> offset [s], beyond the limit
-        self._clock_checked_ns = 0
+        #: The camera host clocks: offsets from arrival delays, the cameras named off.
+        self.clocks = ClockCheck(self.camera_ids, self.sync.stats,
+                                 sync_config.offset_warn_fraction,
+                                 lambda key, text: self.log.throttled(key, text))
 
     @property
     def publish_tentative(self) -> bool:
@@ -160,7 +158,7 @@ class LiveFusion:
         result = self.sync.add(camera, stamp_ns, poses, now_ns)
         intake = Intake(result.accepted, result.kind, result.reason, result.reset)
         if result.accepted or result.kind == 'late':
-            self._check_clock(camera, stamp_ns, clock_ns)
+            self.clocks.observe(camera, stamp_ns, clock_ns)
         if result.reset:
             self._reset(result.reason, from_sync=True)
         if result.kind == 'late':
@@ -286,30 +284,9 @@ class LiveFusion:
         # nothing, and counts as late in /diagnostics, not as rejected
         return bool(used)
 
-    def _check_clock(self, camera: str, stamp_ns: int, clock_ns: int) -> None:
-        """Note the message's arrival delay; each second, warn of cameras whose stamps are off."""
-        fraction = self.sync_config.offset_warn_fraction
-        if fraction <= 0.0:
-            return
-        self.stamp_offsets.observe(camera, stamp_ns, clock_ns)
-        if clock_ns - self._clock_checked_ns < NS_PER_S:
-            return
-        self._clock_checked_ns = clock_ns
-        stats = self.sync.stats
-        rates = [r for r in (stats[c].usual_rate_hz for c in self.camera_ids) if r > 0]
-        if not rates:
-            return
-        period_s = 1.0 / float(np.median(rates))
-        phases = {c: stats[c].offset_mean_s for c in self.camera_ids}
-        self.clock_suspects = dict(
-            self.stamp_offsets.suspects(period_s, fraction, CLOCK_WARN_FLOOR_S, phases))
-        for cam, offset_s in self.clock_suspects.items():
-            self.log.throttled(f'{cam}:clock_offset', describe_offset(cam, offset_s, period_s))
-
     def _reset(self, why: str, from_sync: bool = False) -> None:
         self.counts['resets'] += 1
-        self.stamp_offsets.reset()
-        self.clock_suspects = {}
+        self.clocks.reset()
         self.log.warning(f'reset: {why}; synchroniser and tracks cleared')
         if not from_sync:
             self.sync.reset()

@@ -31,7 +31,7 @@ cameras whose inference finishes at different times lose no set:
   or it has been silent for longer than ``max_wait`` plus its period while its last stamp is
   more than ``max_wait`` before the pivot. Then it is emitted as a
   partial set when at least ``min_views`` cameras contributed, otherwise its messages are
-  dropped (``pivots_dropped``). ``poll(now)`` applies the wait when no message arrives.
+  dropped (``counts.pivots_dropped``). ``poll(now)`` applies the wait when no message arrives.
 * A camera may announce images it will send nothing for (``skip``: stamps strictly between
   two of its images, e.g. replaced by a newer image while its model was busy). A set waits
   for no camera whose announced gap holds its window, so it goes as soon as its last real
@@ -63,32 +63,25 @@ cameras whose inference finishes at different times lose no set:
   that gap).
 * Memory is bounded: at most ``max_queue`` messages per camera (beyond it the oldest pivot is
   decided at once, counted as ``overflow``) and fixed windows for the statistics.
+
+Its parts, one idea each: ``sync_window`` (the adaptive slop and wait), ``sync_outliers``
+(the stream time, held outliers and sustained jumps), ``sync_stats`` (what ``stats`` and
+``counts`` report to ``/diagnostics``).
 """
 
 from bisect import insort
-from collections import Counter, deque
+from collections import deque
 from dataclasses import dataclass, field
 import itertools
 import math
 import time
-from typing import Any, Deque, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
+from mv3dpose_ros.core.live.sync_outliers import StampOutliers
+from mv3dpose_ros.core.live.sync_stats import CameraSyncStats, SyncCounts
+from mv3dpose_ros.core.live.sync_window import AdaptiveSlop, AdaptiveWait
 from mv3dpose_ros.core.types import NS_PER_S
 
-#: Stamp steps kept per camera for its frame period (median).
-PERIOD_WINDOW = 16
-#: Steps needed before a camera's period is trusted.
-PERIOD_MIN_STEPS = 4
-#: Slop used while no camera's period is known yet (half a 60 fps period).
-INITIAL_SLOP_S = 0.008
-#: Arrival spreads kept for the adaptive wait, and needed before it adapts.
-SPREAD_WINDOW, SPREAD_MIN = 128, 4
-#: The adaptive wait is this factor times the p95 of the recent arrival spreads.
-SPREAD_FACTOR = 1.3
-#: Decided sets remembered to measure how late their late messages came.
-DECIDED_WINDOW = 64
-#: Accepted messages whose capture -> arrival delay sets the stream time (the shortest).
-OFFSET_WINDOW = 64
 #: Announced gaps kept per camera (only those around the pending sets matter).
 GAP_WINDOW = 16
 
@@ -177,81 +170,6 @@ class AddResult:
     reset: bool = False              # a sustained jump reset the synchroniser
 
 
-@dataclass
-class CameraSyncStats:
-    """Per-camera counters (since construction; ``reset`` keeps them) and recent offsets."""
-
-    received: int = 0                # messages passed to ``add``
-    used: int = 0                    # messages emitted in a set
-    dropped: int = 0                 # messages discarded unused (all reasons)
-    late: int = 0                    # ... arrived after their set was decided
-    outliers: int = 0                # ... isolated outlier stamps
-    missing: int = 0                 # emitted sets without this camera
-    lost: int = 0                    # frames missing from the stamp sequence (upstream loss)
-    skipped: int = 0                 # ... of them announced as skipped by the camera (``skip``)
-    latest_stamp_ns: Optional[int] = None
-    last_seen_ns: Optional[int] = None       # newest stamp seen (accepted or not): rate, gaps
-    last_arrival_ns: Optional[int] = None
-    period_ns: Optional[int] = None          # lower quartile of the recent stamp steps
-    usual_period_ns: Optional[int] = None    # shortest sustained period seen (usual rate)
-    offsets_ns: Deque[int] = field(default_factory=deque)  # stamp - set stamp, recent used
-    steps_ns: Deque[int] = field(default_factory=lambda: deque(maxlen=PERIOD_WINDOW))
-    unmatched: Counter = field(default_factory=Counter)   # decided unused: reason -> count
-
-    @property
-    def offset_mean_s(self) -> float:
-        """Mean offset of this camera's stamps to the set stamps (NaN before any use)."""
-        if not self.offsets_ns:
-            return math.nan
-        return sum(self.offsets_ns) / len(self.offsets_ns) / NS_PER_S
-
-    @property
-    def offset_jitter_s(self) -> float:
-        """Return the standard deviation of the offsets (NaN before any use)."""
-        n = len(self.offsets_ns)
-        if n == 0:
-            return math.nan
-        mean = sum(self.offsets_ns) / n
-        return math.sqrt(sum((o - mean) ** 2 for o in self.offsets_ns) / n) / NS_PER_S
-
-    @property
-    def rate_hz(self) -> float:
-        """Recent frame rate from the stamps (NaN until known)."""
-        return NS_PER_S / self.period_ns if self.period_ns else math.nan
-
-    @property
-    def usual_rate_hz(self) -> float:
-        """Highest sustained frame rate seen from the stamps (NaN until known)."""
-        return NS_PER_S / self.usual_period_ns if self.usual_period_ns else math.nan
-
-    def observe_step(self, stamp_ns: int, gaps: Iterable[Tuple[int, int]] = ()) -> None:
-        """
-        Update period, usual period and upstream losses with a stamp newer than the last.
-
-        Frames missing inside one of the announced ``gaps`` (after, before) are counted as
-        skipped, not lost.
-        """
-        last, self.last_seen_ns = self.last_seen_ns, max(stamp_ns, self.last_seen_ns or 0)
-        if last is None or stamp_ns <= last:
-            return
-        step = stamp_ns - last
-        if self.usual_period_ns and step > 1.5 * self.usual_period_ns:
-            missed = int(round(step / self.usual_period_ns)) - 1
-            if any(after <= last and stamp_ns <= before for after, before in gaps):
-                self.skipped += missed
-            else:
-                self.lost += missed
-        self.steps_ns.append(step)
-        if len(self.steps_ns) >= PERIOD_MIN_STEPS:
-            # The lower quartile of the steps, not their median: with a third or more of a
-            # camera's frames missing (a CPU that cannot infer them all) the median step is
-            # two periods, and a slop of half that would merge consecutive instants.
-            self.period_ns = int(sorted(self.steps_ns)[len(self.steps_ns) // 4])
-            if len(self.steps_ns) == PERIOD_WINDOW and (
-                    self.usual_period_ns is None or self.period_ns < self.usual_period_ns):
-                self.usual_period_ns = self.period_ns
-
-
 Entry = Tuple[int, int, int, Any]    # (stamp_ns, sequence, arrival_ns, message)
 
 
@@ -260,8 +178,8 @@ class StreamSynchronizer:
 
     def __init__(self, camera_ids: Sequence[str], config: Optional[SyncConfig] = None,
                  clock: Any = time.monotonic_ns) -> None:
-        self.config = config or SyncConfig()
-        self.config.validate()
+        self.config = cfg = config or SyncConfig()
+        cfg.validate()
         ids = list(camera_ids)
         if not ids:
             raise ValueError('StreamSynchronizer needs at least one camera id')
@@ -269,37 +187,54 @@ class StreamSynchronizer:
             raise ValueError(f'duplicate camera ids in {ids}')
         self.camera_ids: Tuple[str, ...] = tuple(ids)
         self._clock = clock                          # arrival clock when add() gets no now_ns
-        self._slop_cfg = int(round(self.config.slop_s * NS_PER_S))
-        self._max_wait = int(round(self.config.max_wait_s * NS_PER_S))
-        self._wait_cap = max(self._max_wait, int(round(self.config.max_wait_cap_s * NS_PER_S)))
-        self.max_wait_ns = self._max_wait            # the wait in use (adaptive, see above)
-        self._spreads: Deque[int] = deque(maxlen=SPREAD_WINDOW)
-        self._decided: Deque[Tuple[int, int, int]] = deque(maxlen=DECIDED_WINDOW)
-        self._jump = int(round(self.config.jump_s * NS_PER_S))
+        self._slop = AdaptiveSlop(cfg.slop_s)
+        self._wait = AdaptiveWait(cfg.max_wait_s, cfg.max_wait_cap_s)
+        self._outliers = StampOutliers(ids, cfg.jump_s, cfg.jump_confirm, cfg.max_queue,
+                                       cfg.stream_ahead_check)
         self._seq = itertools.count()
-        # Per camera, entries sorted by stamp; outliers held aside per camera.
+        # Per camera, entries sorted by stamp.
         self._buffers: Dict[str, List[Entry]] = {c: [] for c in ids}
-        self._suspects: Dict[str, List[Entry]] = {c: [] for c in ids}
+        #: Per camera counters and recent offsets (``/diagnostics``).
         self.stats: Dict[str, CameraSyncStats] = {
-            c: CameraSyncStats(offsets_ns=deque(maxlen=self.config.stats_window)) for c in ids}
+            c: CameraSyncStats(offsets_ns=deque(maxlen=cfg.stats_window)) for c in ids}
+        #: The decisions over every camera (``/diagnostics``).
+        self.counts = SyncCounts()
         self.last_emitted_ns: Optional[int] = None   # pivot of the last emitted set
         self._consumed_ns: Optional[int] = None      # stamps <= this are decided (emit/drop)
-        self._ref: Optional[Tuple[int, int]] = None  # newest accepted stamp, its arrival
-        self._offsets: Deque[int] = deque(maxlen=OFFSET_WINDOW)   # arrival - stamp, recent
         self._first_arrival_ns: Optional[int] = None
         self._last_accepted_arrival: Dict[str, Optional[int]] = dict.fromkeys(ids)
         self._gaps: Dict[str, Deque[Tuple[int, int]]] = {
             c: deque(maxlen=GAP_WINDOW) for c in ids}
-        self.slop_ns = self._slop_cfg or int(INITIAL_SLOP_S * NS_PER_S)
-        self.frame_period_ns: Optional[int] = None   # shortest camera period seen now
-        self.slop_note = ''                          # set once when slop_s had to be narrowed
-        self.sets_emitted = 0
-        self.partial_sets = 0
-        self.pivots_dropped = 0                      # decided pivots with < min_views cameras
-        self.overflow_decisions = 0                  # pivots decided early: a queue was full
-        self.decisions: Counter = Counter()          # why incomplete sets were decided
-        self.resets = 0
-        self.forward_jumps = 0                       # sustained forward jumps taken, no reset
+
+    @property
+    def slop_ns(self) -> int:
+        """Return the slop in use [ns]: stamps within it of a set's pivot join the set."""
+        return self._slop.slop_ns
+
+    @property
+    def frame_period_ns(self) -> Optional[int]:
+        """Return the shortest camera frame period seen now [ns] (None until known)."""
+        return self._slop.frame_period_ns
+
+    @property
+    def slop_note(self) -> str:
+        """Return why the configured slop was narrowed ('' while it was not)."""
+        return self._slop.note
+
+    @property
+    def max_wait_ns(self) -> int:
+        """
+        Return the wait in use [ns].
+
+        ``max(max_wait_s, 1.3 x spread_p95_s)``, at most ``max_wait_cap_s``: see the module
+        docstring.
+        """
+        return self._wait.max_wait_ns
+
+    @property
+    def spread_p95_s(self) -> float:
+        """Return the p95 arrival spread of the recent sets' messages [s] (NaN before any)."""
+        return self._wait.spread_p95_s
 
     # --- public API ------------------------------------------------------------------------
 
@@ -325,24 +260,22 @@ class StreamSynchronizer:
         if self._first_arrival_ns is None:
             self._first_arrival_ns = now
         entry = (stamp_ns, next(self._seq), now, msg)
-        off = self._outlier_offset(camera_id, stamp_ns, now)
+        off = self._outliers.offset(stamp_ns, now, stats.last_seen_ns)
         if off is None:
-            self._drop_suspects(camera_id)           # earlier outliers were isolated glitches
+            self._drop_outliers(camera_id)           # earlier outliers were isolated glitches
             return self._accept(camera_id, entry, now)
-        held = self._suspects[camera_id]
-        held.append(entry)
-        if len(held) > self.config.max_queue:
-            held.pop(0)
-            stats.dropped += 1
-            stats.outliers += 1
-        group = self._sustained_jump()
+        pushed_out = self._outliers.hold(camera_id, entry)
+        stats.dropped += pushed_out
+        stats.outliers += pushed_out
+        group = self._outliers.sustained_jump()
         if group:
-            return self._restart(group, camera_id, stamp_ns, off, now)
+            return self._restart(group, off, now)
         return AddResult(accepted=False, kind='outlier', reason=(
             f'camera {camera_id!r}: stamp {stamp_ns / NS_PER_S:.6f} s is {off / NS_PER_S:+.3f}'
             f' s from the stream time of the other messages (limit sync.jump_s '
             f'{self.config.jump_s:g} s); held aside and dropped unless it starts a sustained '
-            f'jump on at least {self._jump_cameras()} cameras (check the camera clocks)'))
+            f'jump on at least {self._outliers.cameras_needed} cameras (check the camera '
+            'clocks)'))
 
     def observe(self, camera_id: str, stamp_ns: int) -> None:
         """Count a stamp the caller dropped before ``add`` (rate and gap statistics only)."""
@@ -386,16 +319,15 @@ class StreamSynchronizer:
             st = self.stats[cam]
             st.dropped += len(self._buffers[cam])
             self._buffers[cam].clear()
-            self._drop_suspects(cam)
+            self._drop_outliers(cam)
             st.latest_stamp_ns = st.last_seen_ns = None
         self.last_emitted_ns = None
         self._consumed_ns = None
-        self._ref = None
-        self._offsets.clear()
-        self._decided.clear()                        # stamps start again; spreads are kept
+        self._outliers.forget_time()
+        self._wait.forget_sets()                     # stamps start again; spreads are kept
         for gaps in self._gaps.values():
             gaps.clear()
-        self.resets += 1
+        self.counts.resets += 1
 
     def pending(self) -> int:
         """Return the number of buffered messages over all cameras (outliers excluded)."""
@@ -422,77 +354,30 @@ class StreamSynchronizer:
         if pivot is None:
             return None
         chosen, first = self._candidates(pivot)
-        due = [first + self.max_wait_ns]
+        wait = self.max_wait_ns
+        due = [first + wait]
         for cam in self.camera_ids:
             if cam not in chosen:
                 last = self._last_accepted_arrival[cam]
                 if last is None:
                     last = self._first_arrival_ns or now_ns
-                due.append(last + self.max_wait_ns + (self.stats[cam].period_ns or 0) + 1)
+                due.append(last + wait + (self.stats[cam].period_ns or 0) + 1)
         future = [t for t in due if t > now_ns]
         return min(future) if future else now_ns
 
     @property
     def held_outliers(self) -> int:
         """Return the number of outlier messages held aside now."""
-        return sum(len(s) for s in self._suspects.values())
+        return self._outliers.held
 
     # --- internals -------------------------------------------------------------------------
 
-    def _jump_cameras(self) -> int:
-        return min(2, len(self.camera_ids))
+    def _drop_outliers(self, cam: str) -> None:
+        n = self._outliers.drop(cam)
+        self.stats[cam].dropped += n
+        self.stats[cam].outliers += n
 
-    def _outlier_offset(self, cam: str, stamp_ns: int, now: int) -> Optional[int]:
-        """
-        Return how far ``stamp_ns`` is from the stream time if beyond ``jump_s``, else None.
-
-        Ahead: beyond the stream time, the later of the newest accepted stamp advanced by the
-        arrival time since and the arrival clock less the shortest recent delay. Behind:
-        before it and also before the camera's own newest stamp, by ``jump_s`` each; a camera
-        that merely lags (its own stamps still advance, e.g. its input queue is behind on an
-        overloaded host, or it has sent nothing yet) is no outlier: its messages are late, not a
-        new timeline.
-        """
-        if self._ref is None:
-            return None
-        ref_stamp, ref_arrival = self._ref
-        # Stream time: the arrival clock less the shortest recent capture -> arrival delay
-        # (at least the newest stamp advanced by the time since it arrived), so detections
-        # whose delay varies by seconds (bursts of inference on a loaded host) are not ahead.
-        lead = min(self._offsets) if self._offsets else ref_arrival - ref_stamp
-        ahead = stamp_ns - max(ref_stamp + max(0, now - ref_arrival), now - lead)
-        if ahead > self._jump and self.config.stream_ahead_check:
-            return ahead
-        own = self.stats[cam].last_seen_ns
-        # A camera with no accepted stamp yet has no timeline to jump from: one whose first
-        # detections come seconds after the others' (a slower inference) merely lags.
-        if stamp_ns < ref_stamp - self._jump and own is not None and stamp_ns < own - self._jump:
-            return stamp_ns - ref_stamp
-        return None
-
-    def _drop_suspects(self, cam: str) -> None:
-        held = self._suspects[cam]
-        if held:
-            self.stats[cam].dropped += len(held)
-            self.stats[cam].outliers += len(held)
-            held.clear()
-
-    def _sustained_jump(self) -> List[str]:
-        """Cameras whose held outliers agree on a new timeline (empty: no sustained jump)."""
-        cams = [c for c in self.camera_ids
-                if len(self._suspects[c]) >= self.config.jump_confirm]
-        need = self._jump_cameras()
-        if len(cams) < need:
-            return []
-        newest = {c: max(e[0] for e in self._suspects[c]) for c in cams}
-        for c in cams:
-            group = [d for d in cams if abs(newest[d] - newest[c]) <= self._jump]
-            if len(group) >= need:
-                return group
-        return []
-
-    def _restart(self, group: List[str], cam: str, stamp_ns: int, off: int,
-                 now: int) -> AddResult:
+    def _restart(self, group: List[str], off: int, now: int) -> AddResult:
         """
         Take a sustained jump; replay the held messages (the group's first).
 
@@ -501,9 +386,7 @@ class StreamSynchronizer:
         pause, or an overloaded node whose input queues dropped their oldest messages) time
         simply goes on: the stream time moves to the new stamps and nothing is reset.
         """
-        held = {c: list(self._suspects[c]) for c in self.camera_ids}
-        for c in self.camera_ids:
-            self._suspects[c].clear()
+        held = self._outliers.take()
         what = (f'stamps of cameras {", ".join(group)} jumped {off / NS_PER_S:+.3f} s for '
                 f'{self.config.jump_confirm}+ messages each')
         if off < 0:
@@ -511,9 +394,8 @@ class StreamSynchronizer:
             result = AddResult(reset=True, reason=f'{what} (bag loop, driver restart or clock '
                                'step back); synchroniser reset')
         else:
-            self._ref = None
-            self._offsets.clear()
-            self.forward_jumps += 1
+            self._outliers.forget_time()
+            self.counts.forward_jumps += 1
             result = AddResult(reason=f'{what} (pause or input dropped under load); '
                                'continuing from the new stamps')
         order = sorted((e for c in group for e in ((c, x) for x in held[c])),
@@ -521,11 +403,10 @@ class StreamSynchronizer:
         order += sorted((e for c in self.camera_ids if c not in group
                          for e in ((c, x) for x in held[c])), key=lambda ce: ce[1][1])
         for c, entry in order:
-            off_c = self._outlier_offset(c, entry[0], now)
-            if off_c is None:
+            if self._outliers.offset(entry[0], now, self.stats[c].last_seen_ns) is None:
                 result.sets.extend(self._accept(c, entry, now).sets)
             else:
-                self._suspects[c].append(entry)
+                self._outliers.hold(c, entry)
         return result
 
     def _accept(self, cam: str, entry: Entry, now: int) -> AddResult:
@@ -535,38 +416,18 @@ class StreamSynchronizer:
         stats.observe_step(stamp_ns, self._gaps[cam])
         if stats.latest_stamp_ns is None or stamp_ns > stats.latest_stamp_ns:
             stats.latest_stamp_ns = stamp_ns
-        self._update_slop()
+        self._slop.update(self.stats)
         if self._consumed_ns is not None and stamp_ns <= self._consumed_ns:
             stats.dropped += 1
             stats.late += 1
-            self._record_lateness(stamp_ns, entry[2])
+            self._wait.late(stamp_ns, entry[2])
             return AddResult(accepted=False, kind='late', reason=(
                 f'camera {cam!r}: stamp {stamp_ns / NS_PER_S:.6f} s arrived after its set was '
                 f'decided (sets up to {self._consumed_ns / NS_PER_S:.6f} s are emitted or '
                 f'dropped; a camera this late needs a longer sync.max_wait_s)'))
-        if self._ref is None or stamp_ns > self._ref[0]:
-            self._ref = (stamp_ns, entry[2])
-        self._offsets.append(entry[2] - stamp_ns)
+        self._outliers.accepted(stamp_ns, entry[2])
         insort(self._buffers[cam], entry, key=lambda e: e[0])
         return AddResult(sets=self._process(now))
-
-    def _update_slop(self) -> None:
-        periods = [(s.period_ns, c) for c, s in self.stats.items() if s.period_ns]
-        if not periods:
-            return
-        period, cam = min(periods)
-        self.frame_period_ns = period
-        half = period // 2
-        if not self._slop_cfg:
-            self.slop_ns = half
-            return
-        self.slop_ns = min(self._slop_cfg, half)
-        if self._slop_cfg > half and not self.slop_note:
-            self.slop_note = (
-                f'sync.slop_s {self.config.slop_s:g} s is wider than half the observed frame '
-                f'period ({period / 1e6:.1f} ms = {NS_PER_S / period:.1f} Hz, camera {cam}): '
-                f'using {half / NS_PER_S:.4f} s so consecutive frames of a camera do not merge '
-                f'(set sync.slop_s to 0 to follow the frame rate)')
 
     def _candidates(self, pivot: int) -> Tuple[Dict[str, int], int]:
         """Return camera -> index of its message nearest ``pivot`` and their first arrival."""
@@ -593,7 +454,8 @@ class StreamSynchronizer:
         Else why none can: 'skipped (announced)' when a camera's announced gap holds the
         window, else 'no camera can still come'.
         """
-        hi = pivot + self.slop_ns
+        slop, wait = self.slop_ns, self.max_wait_ns
+        hi = pivot + slop
         reason = 'no camera can still come'
         for cam in self.camera_ids:
             if cam in chosen:
@@ -606,13 +468,13 @@ class StreamSynchronizer:
             if last_arrival is None:                 # nothing usable yet: silent since start
                 last_arrival = self._first_arrival_ns
             period = st.period_ns or 0
-            tol = min(period // 4, self.slop_ns // 2)
+            tol = min(period // 4, slop // 2)
             latest = st.latest_stamp_ns
             if latest is not None and latest > hi and (
                     not period or latest - period > hi or latest - period + tol < pivot):
                 continue        # it sent a later frame, and the one before that is not ours
-            if now - last_arrival > self.max_wait_ns + period and (latest is None or (
-                    period and latest < pivot - max(self.max_wait_ns, period * 3 // 2))):
+            if now - last_arrival > wait + period and (latest is None or (
+                    period and latest < pivot - max(wait, period * 3 // 2))):
                 continue     # silent: nothing for a while, and its last frame is long past
                 #              (a node stalled by the CPU sees every camera late, not silent;
                 #              at a slow set rate whose delay varies, the camera's previous
@@ -628,6 +490,7 @@ class StreamSynchronizer:
     def _process(self, now: int, flush: bool = False) -> List[SyncedSet]:
         """Emit or drop pivots while they are decided; ``flush`` decides everything."""
         out = []
+        counts = self.counts
         while True:
             pivot = self.oldest_pending_ns()
             if pivot is None:
@@ -635,52 +498,23 @@ class StreamSynchronizer:
             chosen, first_arrival = self._candidates(pivot)
             if len(chosen) < len(self.camera_ids) and not flush:
                 if any(len(b) > self.config.max_queue for b in self._buffers.values()):
-                    self.overflow_decisions += 1
-                    self.decisions['queue full'] += 1
+                    counts.overflow_decisions += 1
+                    counts.decisions['queue full'] += 1
                 elif now - first_arrival >= self.max_wait_ns:
-                    self.decisions['waited max_wait'] += 1
+                    counts.decisions['waited max_wait'] += 1
                 else:
                     why = self._may_still_come(chosen, pivot, now)
                     if why is None:
                         return out
-                    self.decisions[why] += 1
-            self._remember(pivot, chosen, first_arrival, flush)
+                    counts.decisions[why] += 1
+            if not flush:
+                self._wait.decided(pivot, pivot + self.slop_ns, first_arrival,
+                                   [self._buffers[c][i][2] for c, i in chosen.items()])
             if len(chosen) >= self.config.min_views:
                 out.append(self._emit(pivot, chosen))
             else:
                 self._drop_through(pivot + self.slop_ns, 'too_few_views')
-                self.pivots_dropped += 1
-
-    @property
-    def spread_p95_s(self) -> float:
-        """Return the p95 arrival spread of the recent sets' messages [s] (NaN before any)."""
-        if not self._spreads:
-            return math.nan
-        ordered = sorted(self._spreads)
-        return ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))] / NS_PER_S
-
-    def _remember(self, pivot: int, chosen: Dict[str, int], first: int, flush: bool) -> None:
-        """Record a decided set's window and its members' arrival spread (adaptive wait)."""
-        if flush:
-            return
-        self._decided.append((pivot, pivot + self.slop_ns, first))
-        for cam, i in chosen.items():
-            self._spreads.append(self._buffers[cam][i][2] - first)
-        self._adapt_wait()
-
-    def _record_lateness(self, stamp_ns: int, arrival_ns: int) -> None:
-        """Record how long after its set's first message a late message arrived."""
-        for lo, hi, first in reversed(self._decided):
-            if lo <= stamp_ns <= hi:
-                self._spreads.append(max(0, arrival_ns - first))
-                self._adapt_wait()
-                return
-
-    def _adapt_wait(self) -> None:
-        if len(self._spreads) < SPREAD_MIN:
-            return
-        want = int(SPREAD_FACTOR * self.spread_p95_s * NS_PER_S)
-        self.max_wait_ns = min(max(self._max_wait, want), self._wait_cap)
+                counts.pivots_dropped += 1
 
     def _emit(self, pivot: int, chosen: Dict[str, int]) -> SyncedSet:
         members = {cam: self._buffers[cam][i] for cam, i in chosen.items()}
@@ -698,9 +532,9 @@ class StreamSynchronizer:
                 st.missing += 1
         self._drop_through(pivot + self.slop_ns, 'duplicates')
         self.last_emitted_ns = pivot
-        self.sets_emitted += 1
+        self.counts.sets_emitted += 1
         if missing:
-            self.partial_sets += 1
+            self.counts.partial_sets += 1
         return SyncedSet(stamp_ns=stamp, messages={c: e[3] for c, e in members.items()},
                          stamps_ns=stamps, missing=missing)
 
@@ -716,17 +550,3 @@ class StreamSynchronizer:
                 st = self.stats[cam]
                 st.dropped += n
                 st.unmatched[reason] += n
-
-
-def summarize(stats: Dict[str, CameraSyncStats], cameras: Iterable[str]) -> Dict[str, dict]:
-    """Return plain-dict statistics per camera (for logs and diagnostics)."""
-    return {c: {'received': stats[c].received, 'used': stats[c].used,
-                'dropped': stats[c].dropped, 'late': stats[c].late,
-                'outliers': stats[c].outliers, 'lost upstream': stats[c].lost,
-                'skipped (announced)': stats[c].skipped,
-                'missing': stats[c].missing, 'rate_hz': stats[c].rate_hz,
-                'usual_rate_hz': stats[c].usual_rate_hz,
-                'offset_mean_s': stats[c].offset_mean_s,
-                'offset_jitter_s': stats[c].offset_jitter_s,
-                **{f'dropped: {k}': n for k, n in sorted(stats[c].unmatched.items())}}
-            for c in cameras}
