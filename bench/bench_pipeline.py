@@ -426,11 +426,9 @@ def make_videos(cams: Sequence[str], rate: float, hold: float,
 
 def shipped_max_wait() -> float:
     """Return ``sync.max_wait_s`` of config/fusion.yaml."""
-    import yaml
-    with open(os.path.join(ROOT, 'config', 'fusion.yaml'), encoding='utf-8') as f:
-        doc = yaml.safe_load(f)
-    return next((float(s['ros__parameters']['sync']['max_wait_s'])
-                 for s in doc.values() if 'sync' in s.get('ros__parameters', {})), 0.1)
+    from mv3dpose_ros.io.params_file import node_parameters, read_params_file
+    doc = read_params_file(os.path.join(ROOT, 'config', 'fusion.yaml'))
+    return float(node_parameters([doc], 'fusion_node').get('sync', {}).get('max_wait_s', 0.1))
 
 
 def run_rig(args: argparse.Namespace, n: int, pose2d_params: List[str]) -> None:

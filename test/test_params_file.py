@@ -16,8 +16,8 @@
 
 import os
 
-from mv3dpose_ros.io.params_file import (first_section_with, parameter_sections,
-                                         ParamsFileError, read_params_file)
+from mv3dpose_ros.io.params_file import (first_section_with, node_parameters,
+                                         parameter_sections, ParamsFileError, read_params_file)
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -46,6 +46,16 @@ def test_sections_are_read_in_file_order_with_their_node_keys(tmp_path):
     assert first_section_with({'robots': doc['robots']}, 'fusion') == {'tracking_gate_m': 0.5}
     assert first_section_with(doc, 'sync') is None
     assert first_section_with({'tracking_gate_m': 0.3}, 'fusion') is None    # a flat mapping
+
+
+def test_a_node_gets_every_section_that_names_it_later_ones_winning(tmp_path):
+    first = {'/**': {'ros__parameters': {'a': 1, 'b': 1}},
+             '/**/fusion_node/': {'ros__parameters': {'b': 2}},
+             'pose2d_node': {'ros__parameters': {'a': 9}},
+             'robots': {'fusion_node': {'ros__parameters': {'a': 9}}}}    # under a namespace
+    second = {'/fusion_node': {'ros__parameters': {'c': 3}}, 'fusion_node': {}}
+    assert node_parameters([first, second], 'fusion_node') == {'a': 1, 'b': 2, 'c': 3}
+    assert node_parameters([first, None], 'pose2d_node') == {'a': 9, 'b': 1}
 
 
 def test_the_shipped_fusion_file_has_its_sections_under_every_node():

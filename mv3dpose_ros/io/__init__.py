@@ -21,7 +21,7 @@ Files: bags, datasets, detections, tracks, images and videos; no ROS (rosbags, n
   number, the one video reader (``VideoReader``: frames, rate, seeking), a folder or video
   played by index (``FrameSource``, the image publisher's) (``SourceError``).
 - :mod:`.params_file`: ROS 2 params files read as plain data without rclpy (``mv3dpose track
-  --params``, scripts): their ``ros__parameters`` sections by node key.
+  --params``, the process list of a rig, scripts): their ``ros__parameters`` by node key.
 - :mod:`.cameras`: a rig's inputs: the calibration, one image folder or video per camera matched
   to its cameras, and the time points that align their frames.
 - :mod:`.openpose`: OpenPose JSON detections, one folder per camera, one file per frame.

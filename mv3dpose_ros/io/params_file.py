@@ -21,7 +21,7 @@ A node reads its params files through rcl; what reads them outside a node (``mv3
 or namespaces nesting a node name) to ``ros__parameters`` mappings.
 """
 
-from typing import Any, Dict, Iterator, Optional, Tuple
+from typing import Any, Dict, Iterator, Optional, Sequence, Tuple
 
 from mv3dpose_ros.core.files import load_yaml, LoadError, read_text
 
@@ -63,3 +63,19 @@ def first_section_with(doc: Any, name: str) -> Optional[Dict[str, Any]]:
     """Return mapping ``name`` of the first ``ros__parameters`` that holds one, whatever node."""
     return next((params[name] for _, params in parameter_sections(doc)
                  if isinstance(params.get(name), dict)), None)
+
+
+def node_parameters(docs: Sequence[Dict[str, Any]], node: str) -> Dict[str, Any]:
+    """
+    Merge the ``ros__parameters`` of every top-level key that names ``node``, files in order.
+
+    The keys are ``/**``, ``/**/<node>``, ``<node>`` and ``/<node>`` (a trailing ``/``
+    ignored); a later section wins, as in rcl.
+    """
+    out: Dict[str, Any] = {}
+    for doc in docs:
+        for key, section in (doc or {}).items():
+            name = str(key).rstrip('/')
+            if name in ('/**', f'/**/{node}', node, f'/{node}') and isinstance(section, dict):
+                out.update(section.get('ros__parameters', {}) or {})
+    return out

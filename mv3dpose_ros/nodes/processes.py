@@ -32,6 +32,7 @@ import os
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from mv3dpose_ros.core.geometry.calibration import load_calibration
+from mv3dpose_ros.io.params_file import node_parameters, ParamsFileError, read_params_file
 from mv3dpose_ros.ros.names import camera_topic, check_pattern, RosNameError
 from mv3dpose_ros.ros.params import package_search_dirs, resolve_path
 import yaml
@@ -145,17 +146,6 @@ def split_threads(cameras: int, cores: Optional[int] = None) -> int:
     return max(1, int(cores) // max(1, int(cameras)))
 
 
-def node_section(docs: Sequence[Dict[str, Any]], node: str) -> Dict[str, Any]:
-    """Merge the ros__parameters of every key matching ``node`` (wildcards included)."""
-    out: Dict[str, Any] = {}
-    for doc in docs:
-        for key, section in (doc or {}).items():
-            name = str(key).rstrip('/')
-            if name in ('/**', f'/**/{node}', node, f'/{node}') and isinstance(section, dict):
-                out.update(section.get('ros__parameters', {}) or {})
-    return out
-
-
 def rig_processes(params_files: Sequence[str] = DEFAULT_PARAMS, rig: Optional[str] = None,
                   cameras: Optional[Sequence[str]] = None, namespace: str = DEFAULT_NAMESPACE,
                   image_topic: str = DEFAULT_IMAGE_TOPIC,
@@ -179,11 +169,11 @@ def rig_processes(params_files: Sequence[str] = DEFAULT_PARAMS, rig: Optional[st
     for path in files:
         if not os.path.isfile(path):
             raise PlanError(f'params file {path!r} not found')
-    docs = []
-    for path in files:
-        with open(path, encoding='utf-8') as f:
-            docs.append(yaml.safe_load(f) or {})
-    fusion_file = node_section(docs, 'fusion_node')
+    try:
+        docs = [read_params_file(path) or {} for path in files]
+    except ParamsFileError as exc:
+        raise PlanError(str(exc)) from exc
+    fusion_file = node_parameters(docs, 'fusion_node')
     fusion_over = dict(fusion_params or {})
     rig = rig or fusion_over.get('rig_config') or fusion_file.get('rig_config')
     if not rig:
@@ -209,8 +199,8 @@ def rig_processes(params_files: Sequence[str] = DEFAULT_PARAMS, rig: Optional[st
     out: List[ProcessSpec] = []
     if pose2d:
         own = dict(pose2d_params or {})
-        threads = own.get('model.threads', (node_section(docs, 'pose2d_node').get('model') or
-                                            {}).get('threads', 0))
+        threads = own.get('model.threads', (node_parameters(docs, 'pose2d_node').get('model')
+                                            or {}).get('threads', 0))
         if not threads:        # 0 = unset: share the cores instead of N x all cores
             own['model.threads'] = split_threads(len(cams))
         out += [ProcessSpec(f'pose2d_node[{cam}]', 'pose2d_node', 'pose2d_node',
