@@ -12,7 +12,10 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""A node stopped by Ctrl-C ends cleanly even when the shutdown races a message take."""
+"""A node stopped by Ctrl-C ends cleanly, also when the shutdown races a take; its exit status."""
+
+import subprocess
+import sys
 
 from mv3dpose_ros.ros.spin import spin_until_shutdown
 import pytest
@@ -55,3 +58,51 @@ def test_an_error_while_running_still_propagates_and_until_stops():
             spin_until_shutdown(executor)
     finally:
         context.try_shutdown()
+
+
+RUN_NODE_CASES = r"""
+import sys
+import rclpy
+from mv3dpose_ros.ros.spin import run_node
+
+
+class Bad(Exception):
+    pass
+
+
+def make(overrides, fail=None):
+    if fail:
+        raise fail
+    return rclpy.create_node('run_node_case')
+
+
+def stop(node, executor):
+    rclpy.try_shutdown()             # as Ctrl-C does
+
+
+print('ok', run_node('case', make, ['prog'], spin=stop, hugepages=False))
+print('config', run_node('case', lambda o: make(o, Bad('no rig')), ['prog'],
+                         config_errors=(Bad,), hugepages=False))
+print('usage', run_node('case', lambda o: make(o, ValueError(o)), ['prog', '--rate', 'x'],
+                        parse_cli=lambda argv: ' '.join(argv), usage_errors=(ValueError,),
+                        hugepages=False))
+print('not started', run_node('case', make, ['prog'], not_started=lambda node: 'no model',
+                              hugepages=False))
+sys.stdout.flush()
+run_node('case', make, ['prog'], spin=stop, stuck=lambda node: 'a thread is stuck',
+         hugepages=False)
+print('not reached')
+"""
+
+
+def test_the_node_main_exit_statuses_and_what_they_say():
+    """run_node: 0 on a stop, 2 on a bad configuration or value, 1 when not started."""
+    res = subprocess.run([sys.executable, '-c', RUN_NODE_CASES], capture_output=True,
+                         text=True, timeout=120)
+    assert res.stdout.splitlines() == ['ok 0', 'config 2', 'usage 2', 'not started 1'], (
+        res.stdout + res.stderr)
+    assert res.returncode == 0                       # os._exit with the status so far
+    assert '[FATAL]' in res.stderr and 'cannot start: no rig' in res.stderr
+    assert 'case: error: --rate x' in res.stderr
+    assert 'not started: no model' in res.stderr
+    assert res.stderr.rstrip().endswith('[case] a thread is stuck')

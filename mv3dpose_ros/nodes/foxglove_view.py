@@ -58,7 +58,7 @@ from mv3dpose_ros.ros.messages import (decode_person2d_array, InvalidMessage, ms
                                        person2d_array_to_numpy, stamp_to_ns)
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos, sensor_qos
-from mv3dpose_ros.ros.spin import run_cli_node
+from mv3dpose_ros.ros.spin import run_node
 from mv3dpose_ros.viz.scene import camera_update, skeleton_update
 import numpy as np
 from rclpy.node import Node
@@ -308,9 +308,9 @@ def _parse_cli(argv: List[str]) -> List[Parameter]:
 
 def main(args: Optional[List[str]] = None) -> int:
     """Entry point of the ``mv3dpose_foxglove_view`` console script."""
-    return run_cli_node('mv3dpose_foxglove_view',
-                        lambda overrides: FoxgloveView(parameter_overrides=overrides),
-                        _parse_cli, args, errors=(ValueError, RuntimeError))
+    return run_node('mv3dpose_foxglove_view',
+                    lambda overrides: FoxgloveView(parameter_overrides=overrides), args,
+                    parse_cli=_parse_cli, usage_errors=(ValueError, RuntimeError))
 
 
 if __name__ == '__main__':

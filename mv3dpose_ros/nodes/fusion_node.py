@@ -58,14 +58,12 @@ from mv3dpose_ros.ros.messages import (InvalidMessage, ns_to_stamp, skeleton_inf
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import (describe, latched_qos, publisher_events, reliable_qos,
                                   sensor_qos, subscription_events)
-from mv3dpose_ros.ros.spin import spin_until_shutdown
+from mv3dpose_ros.ros.spin import run_node
 from mv3dpose_ros.ros.tf import TfBridge, TfError
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo
@@ -422,25 +420,9 @@ class FusionNode(Node):
 
 
 def main(args: Optional[List[str]] = None) -> int:
-    """Entry point of the ``fusion_node`` console script."""
-    rclpy.init(args=args)
-    try:
-        node = FusionNode()
-    except ConfigError as exc:
-        rclpy.logging.get_logger('fusion_node').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 2
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        spin_until_shutdown(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Entry point of the ``fusion_node`` console script; exit 2 on a bad configuration."""
+    return run_node('fusion_node', lambda overrides: FusionNode(), args,
+                    config_errors=(ConfigError,), hugepages=False)
 
 
 if __name__ == '__main__':

@@ -78,7 +78,7 @@ from mv3dpose_ros.ros.images import bgr_to_image, camera_info_from_camera, numpy
 from mv3dpose_ros.ros.messages import ns_to_stamp
 from mv3dpose_ros.ros.names import camera_namespace
 from mv3dpose_ros.ros.qos import describe, sensor_qos
-from mv3dpose_ros.ros.spin import run_cli_node, spin_until_shutdown
+from mv3dpose_ros.ros.spin import run_node, spin_until_shutdown
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -406,9 +406,9 @@ def _publish_until_done(node: ImagePublisher, executor: Any) -> None:
 
 def main(args: Optional[List[str]] = None) -> int:
     """Publish until the source ends (or forever with ``--loop``)."""
-    return run_cli_node('image_publisher',
-                        lambda overrides: ImagePublisher(parameter_overrides=overrides),
-                        parse_cli, args, spin=_publish_until_done)
+    return run_node('image_publisher',
+                    lambda overrides: ImagePublisher(parameter_overrides=overrides), args,
+                    parse_cli=parse_cli, spin=_publish_until_done, usage_errors=(ValueError,))
 
 
 if __name__ == '__main__':

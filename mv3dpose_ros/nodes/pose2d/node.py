@@ -39,7 +39,6 @@ This is the ROS wiring. Parameters: ``pose2d.config``; logic: ``pose2d.intake``,
 ``nodes.pose2d``: ``.image_intake``, ``.rig_rate``, ``.diagnostics``.
 """
 
-import os
 import sys
 import threading
 import time
@@ -64,15 +63,12 @@ from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, RateLimitedLog
 from mv3dpose_ros.ros.images import (decode_image_bytes, ImageError, message_to_numpy,
                                      numpy_to_image)
-from mv3dpose_ros.ros.memory import reexec_with_hugepages
 from mv3dpose_ros.ros.messages import (ns_to_stamp, numpy_to_person2d_array, skeleton_info_msg,
                                        stamp_to_ns)
 from mv3dpose_ros.ros.qos import describe as describe_qos
 from mv3dpose_ros.ros.qos import latched_qos, publisher_events, reliable_qos, sensor_qos
-from mv3dpose_ros.ros.spin import spin_until_shutdown
+from mv3dpose_ros.ros.spin import run_node
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import CompressedImage, Image
 
@@ -413,36 +409,20 @@ class Pose2DNode(LifecycleNode):
             self.resolve_topic_name('image'), self._param('image_qos.reliability'))]
 
 
+def _not_started(node: Pose2DNode) -> Optional[str]:
+    """Return why an autostarting node is not active (the model could not be loaded...)."""
+    return node.error if node.get_parameter('autostart').value and not node.active else None
+
+
+def _stuck(node: Pose2DNode) -> str:
+    return ('the inference thread did not stop within 5 s (inside the model); exiting without '
+            'waiting for it') if node.worker_stuck else ''
+
+
 def main(args: Optional[List[str]] = None) -> int:
     """Run one pose2d node until interrupted; exit 1 when the model cannot be loaded."""
-    if args is None:
-        reexec_with_hugepages()         # 6 MB images with 2 MiB page faults (ros/memory.py)
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = Pose2DNode()
-        if node.get_parameter('autostart').value and not node.active:
-            node.get_logger().fatal(f'not started: {node.error}')
-            code = 1
-        else:
-            executor = SingleThreadedExecutor()
-            executor.add_node(node)
-            spin_until_shutdown(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if node is not None and node.worker_stuck:
-        # Exiting normally would run onnxruntime's and DDS's C++ destructors under the thread
-        # still inside them, which can hang the process until SIGKILL.
-        print('[pose2d_node] the inference thread did not stop within 5 s (inside the model); '
-              'exiting without waiting for it', file=sys.stderr, flush=True)
-        sys.stdout.flush()
-        os._exit(code)
-    return code
+    return run_node('pose2d_node', lambda overrides: Pose2DNode(), args,
+                    not_started=_not_started, stuck=_stuck)
 
 
 if __name__ == '__main__':
