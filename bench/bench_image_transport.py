@@ -96,10 +96,10 @@ def publisher(args: argparse.Namespace) -> int:
     msg = numpy_to_image(cv2.imread(FRAME))
     ex = SingleThreadedExecutor()
     ex.add_node(node)
-    deadline = time.monotonic() + 30
-    while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
-        ex.spin_once(timeout_sec=0.05)
-    time.sleep(1.0)                      # discovery of the other side settles
+    # the package's one wait for subscribers (it settles for the other side's discovery)
+    from mv3dpose_ros.ros.subscribers import SubscriberWait
+    SubscriberWait({TOPIC: 'sensor_msgs/msg/Image'}, lambda _t: pub.get_subscription_count(),
+                   prefix='publisher: ').wait(ex, 30.0)
     period = 1.0 / args.rate
     t0 = time.monotonic()
     c0 = time.process_time()

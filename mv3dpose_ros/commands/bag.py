@@ -26,10 +26,13 @@ record  subscribes with ``raw=True`` (no decoding cost) and writes the CDR bytes
 play    publishes the raw bytes at the recorded pace (``--rate``), each preceded by a
         ``rosgraph_msgs/Clock`` carrying the message's bag time, so nodes with ``use_sim_time``
         follow the bag; ``--loop`` makes the clock jump back, which the fusion node treats as
-        a reset.
+        a reset. ``--wait-for-subscribers`` waits for the topics the pipeline reads
+        (``ros.subscribers``: every played topic of a type that has a subscriber, or
+        ``--wait-topics``), and says what it still waits for.
 info    prints topics, types, counts, QoS, duration and storage, after checking every chunk
         CRC and decoding every message (``--no-verify`` skips that).
-recover salvages interrupted recordings (``.NAME.partial-PID`` of dead processes) into bags.
+recover salvages interrupted recordings (``.NAME.partial-PID`` of dead writers: the writer's
+        lock is free) into bags; ``record`` warns about those only.
 """
 
 import argparse
@@ -45,7 +48,8 @@ from typing import Dict, Iterable, List, Optional, Sequence
 
 from mv3dpose_ros.io.bag import BagError, BagReader, BagWriter, check_bag, DEFAULT_STORAGE
 from mv3dpose_ros.io.bag import partial_dirs
-from mv3dpose_ros.io.bag import salvage, STORAGES, verify_bag
+from mv3dpose_ros.io.bag import salvage, STORAGES, verify_bag, writer_alive
+from mv3dpose_ros.ros.subscribers import SETTLE_S, SubscriberWait
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 from tqdm import tqdm
@@ -53,10 +57,9 @@ from tqdm import tqdm
 # Topics that ``record`` without topic names leaves out (ros2 bag record -a does the same for
 # the hidden ones; /clock would feed a replayed clock back into itself).
 EXCLUDED_BY_DEFAULT = ('/rosout', '/parameter_events', '/clock')
-#: After the player sees every subscriber, the subscribers still have to see the player (each
-#: side of a DDS match is discovered on its own): a reader that has not, drops what comes
-#: (best effort) or fetches it late, out of pace (reliable). Waited once before playing.
-MATCH_SETTLE_S = 0.5
+#: How ``play`` tells where to go from a wait for subscribers (``ros.subscribers``).
+WAIT_HINT = ('Ctrl-C stops; to start sooner, rerun with --wait-topics TOPIC ... naming the '
+             'topics to wait for')
 #: How long a played reliable topic waits at the end for its readers to acknowledge it all.
 ACK_TIMEOUT_S = 5.0
 
@@ -159,6 +162,10 @@ class _StopFlag:
     def __exit__(self, *exc) -> None:
         for sig, old in self._old.items():
             signal.signal(sig, old)
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
 
 
 def _progress(total: Optional[int], desc: str, unit: str = 'msg', disable: Optional[bool] = None):
@@ -336,13 +343,6 @@ class _Pacer:
         return time.monotonic() - t0
 
 
-def _settle(executor, seconds: float, stopped) -> None:
-    """Keep spinning ``executor`` for ``seconds`` (or until ``stopped()``)."""
-    end = time.monotonic() + seconds
-    while time.monotonic() < end and not stopped():
-        executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
-
-
 def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iterable[str]] = None,
          start_offset: float = 0.0, clock: bool = True, wait_for_subscribers: float = 0.0,
          delay: float = 0.0, quiet: bool = False, context=None, stop=None,
@@ -352,9 +352,10 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
     Publish the messages of the bag at ``path``; return how many were published.
 
     ``rate`` scales the pace (2 = twice as fast, 0 = as fast as possible); ``start_offset``
-    skips the first seconds; ``wait_for_subscribers`` waits up to that many seconds until every
-    played topic (or each of ``wait_topics``) has a subscriber, then ``MATCH_SETTLE_S`` for the
-    subscribers to see the player (nothing is lost to discovery); ``stop`` is an optional
+    skips the first seconds; ``wait_for_subscribers`` waits up to that many seconds until the
+    played topics of every message type that has a subscriber (or each of ``wait_topics``)
+    have one, and this held for ``ros.subscribers.SETTLE_S`` (the subscribers see the player
+    too; nothing is lost to discovery), saying on stderr what it waits for; ``stop`` is an optional
     callable polled between messages. ``pace_topics``: after each time point (the messages
     sharing one bag timestamp), wait until every pace topic delivered one more message (at
     most ``pace_timeout`` s), so slow nodes that keep only the newest input lose nothing.
@@ -376,6 +377,11 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
         reader.close()
         raise BagError(f'{path}: no topic {", ".join(unknown)} in the bag '
                        f'(it has {", ".join(summary) or "none"})')
+    unplayed = [t for t in wait_topics or () if t not in chosen]
+    if unplayed:
+        reader.close()
+        raise BagError(f'{path}: --wait-topics {", ".join(unplayed)}: not played (the played '
+                       f'topics are {", ".join(chosen)})')
     own_context = context is None
     if own_context:
         context = _init_rclpy()
@@ -402,18 +408,18 @@ def play(path: str, rate: float = 1.0, loop: bool = False, topics: Optional[Iter
             def stopped() -> bool:
                 return flag.stop or not context.ok() or bool(stop and stop())
 
-            deadline = time.monotonic() + max(wait_for_subscribers, 0.0)
-            if pacer is not None:
-                deadline = time.monotonic() + max(wait_for_subscribers, pace_timeout)
-            while time.monotonic() < deadline and not stopped():
-                subscribed = (wait_for_subscribers <= 0 or all(
-                    pubs[t].get_subscription_count() > 0 for t in (wait_topics or pubs)))
-                paced = pacer is None or pacer.subscribe_ready()
-                if subscribed and paced:
-                    if wait_for_subscribers > 0:
-                        _settle(executor, MATCH_SETTLE_S, stopped)
-                    break
-                executor.spin_once(timeout_sec=0.05)
+            def pace_missing() -> List[str]:
+                if pacer is None or pacer.subscribe_ready():
+                    return []
+                return [f'pace topic {t} (--pace-on) to appear' for t in pacer.topics
+                        if t not in pacer.subs]
+
+            SubscriberWait(
+                {t: summary[t].msgtype for t in chosen},
+                lambda t: pubs[t].get_subscription_count(), named=wait_topics,
+                say=None if quiet else _stderr, prefix='bag play: ', hint=WAIT_HINT,
+            ).wait(executor, wait_for_subscribers, stopped, also=pace_missing,
+                   also_timeout=pace_timeout if pacer is not None else 0.0)
             if pacer is not None and len(pacer.subs) < len(pacer.topics):
                 missing = [t for t in pacer.topics if t not in pacer.subs]
                 raise BagError(f'pace topic {", ".join(missing)} never appeared')
@@ -540,12 +546,19 @@ def recover(path: str, output: Optional[str] = None, overwrite: bool = False,
     src = Path(path.rstrip('/'))
     match = re.match(r'^\.(.+)\.partial-(\d+)$', src.name)
     if match and src.is_dir():
+        if writer_alive(src):
+            raise BagError(f'{path}: its writer (process {match.group(2)}) is still recording; '
+                           'stop it first (Ctrl-C or SIGTERM finish the bag themselves)')
         sources, target = [src], src.parent / match.group(1)
     else:
         sources, target = partial_dirs(src), src
         if not sources:
+            live = [d.name for d in src.parent.glob(f'.{src.name}.partial-*')
+                    if d.is_dir() and writer_alive(d)]
             raise BagError(f'{path}: no interrupted recording to recover (no '
-                           f'.{src.name}.partial-PID folder of a dead process beside it)')
+                           f'.{src.name}.partial-PID folder of a dead process beside it'
+                           + (f'; {", ".join(live)} belong to running recorders'
+                              if live else '') + ')')
     results = []
     for d in sources:
         pid = d.name.rsplit('-', 1)[-1]
@@ -599,8 +612,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ply.add_argument('--no-clock', dest='clock', action='store_false',
                      help='do not publish /clock')
     ply.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
-                     help='wait up to this long until every topic has a subscriber (then '
-                          f'{MATCH_SETTLE_S:g} s more, for the subscribers to see the player)')
+                     help='wait up to this long (then play anyway) for the pipeline to '
+                          'subscribe: for every played topic of a message type that has a '
+                          "subscriber on one of the played topics (one camera's image_raw "
+                          "subscribed: every camera's; camera_info that nothing reads: not), "
+                          f'and until that held for {SETTLE_S:g} s; says on stderr what it '
+                          'still waits for')
+    ply.add_argument('--wait-topics', nargs='+', metavar='TOPIC',
+                     help='with --wait-for-subscribers: wait for these played topics instead '
+                          '(each must have a subscriber)')
     ply.add_argument('--delay', type=float, default=0.0, help='sleep before playing [s]')
     ply.add_argument('--pace-on', nargs='+', metavar='TOPIC',
                      help='after each time point wait until every TOPIC delivered one more '
@@ -645,7 +665,8 @@ def run(args: argparse.Namespace) -> int:
         if args.bag_command == 'play':
             n = play(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
                      start_offset=args.start_offset, clock=args.clock,
-                     wait_for_subscribers=args.wait_for_subscribers, delay=args.delay,
+                     wait_for_subscribers=args.wait_for_subscribers,
+                     wait_topics=args.wait_topics, delay=args.delay,
                      quiet=args.quiet, pace_topics=args.pace_on,
                      pace_timeout=args.pace_timeout)
             if not args.quiet:

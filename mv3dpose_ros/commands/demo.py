@@ -59,6 +59,7 @@ from mv3dpose_ros.ros.messages import msg_to_tracks, ns_to_stamp, numpy_to_perso
 from mv3dpose_ros.ros.messages import stamp_to_ns
 from mv3dpose_ros.ros.names import camera_namespace, image_topic, PERSONS_TOPIC, persons_topic
 from mv3dpose_ros.ros.params import package_search_dirs
+from mv3dpose_ros.ros.subscribers import SubscriberWait
 from mv3dpose_ros.sim.scene import make_scene
 import numpy as np
 import rclpy
@@ -187,16 +188,16 @@ def _recorder_cmd(output: Path, topics: Sequence[str]) -> List[str]:
 def _wait_graph(node, executor, pipeline: Pipeline, subscribed: Sequence[str],
                 published: Sequence[str], timeout: float) -> None:
     """Wait until each topic of ``subscribed`` has a subscriber and ``published`` a publisher."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+    def publishers_missing() -> List[str]:
         pipeline.check()
-        missing = [t for t in subscribed if node.count_subscribers(t) == 0]
-        missing += [t for t in published if node.count_publishers(t) == 0]
-        if not missing:
-            return
-        executor.spin_once(timeout_sec=0.1)
-    raise DemoError(f'the nodes did not come up within {timeout:.0f} s (no endpoint on '
-                    f'{", ".join(missing)}); logs in {pipeline.run_dir}')
+        return [f'a publisher on {t}' for t in published if node.count_publishers(t) == 0]
+
+    wait = SubscriberWait({}, node.count_subscribers, named=list(subscribed), say=_say,
+                          prefix='nodes:     ', hint=f'logs in {pipeline.run_dir}')
+    if not wait.wait(executor, timeout, also=publishers_missing, also_timeout=timeout):
+        missing = wait.missing + [t.split()[-1] for t in publishers_missing()]
+        raise DemoError(f'the nodes did not come up within {timeout:.0f} s (no endpoint on '
+                        f'{", ".join(missing)}); logs in {pipeline.run_dir}')
 
 
 # ------------------------------------------------------------------------------------ analysis

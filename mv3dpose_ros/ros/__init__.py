@@ -27,6 +27,7 @@ ROS adapters below the nodes: messages, CDR codecs, names, QoS, parameters, diag
 - :mod:`.bag_convert`: files to bags and back (images, OpenPose JSON, tracks), the library of
   ``mv3dpose convert``.
 - :mod:`.qos`: the package's QoS profiles and incompatible-QoS reporting.
+- :mod:`.subscribers`: waiting for subscribers before publishing: which topics, and saying so.
 - :mod:`.params`: parameter declaration with descriptors, from core config dataclasses.
 - :mod:`.fusion_config`: fusion_node's parameters as config dataclasses, and their checks.
 - :mod:`.inputs`: fusion_node's per-camera input statistics and ``Person2DArray`` checks.

@@ -28,6 +28,7 @@ from typing import Callable, Dict, Iterable, Optional, Sequence
 
 from mv3dpose_ros.ros.names import camera_topic
 from mv3dpose_ros.ros.qos import reliable_qos
+from mv3dpose_ros.ros.subscribers import unsubscribed
 from mv3dpose_ros.testing import spin
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -125,7 +126,7 @@ class Probe:
 
 def all_matched(publishers: Iterable) -> bool:
     """Return whether every publisher has a subscriber (the node under test listens)."""
-    return all(p.get_subscription_count() for p in publishers)
+    return not unsubscribed(publishers)
 
 
 def latest_status(arrays: Iterable) -> Dict[str, object]:

@@ -28,7 +28,8 @@ full install. Import from here (``from mv3dpose_ros.io.bag import BagReader``); 
 - ``reader``: ``BagReader`` (every library failure a ``BagError`` naming the file, CRCs
   checked while reading), ``check_bag``.
 - ``writer``: ``BagWriter`` (atomic: a hidden partial directory renamed into place on success;
-  ``checkpoint`` survives SIGKILL), ``partial_dirs``.
+  ``checkpoint`` survives SIGKILL), ``partial_dirs`` and ``writer_alive`` (a lock tells
+  running writers from dead ones).
 - ``salvage``: a killed recording's partial directory turned into a complete bag
   (``mv3dpose bag recover``).
 """
@@ -40,10 +41,11 @@ from mv3dpose_ros.io.bag.reader import BagMessage, BagReader, check_bag, TopicSu
 from mv3dpose_ros.io.bag.salvage import salvage, SalvageReport
 from mv3dpose_ros.io.bag.typestore import deserialize, get_typestore, make_qos, MSG_PACKAGE
 from mv3dpose_ros.io.bag.typestore import msg_dir, normalise_type, serialize
-from mv3dpose_ros.io.bag.writer import BagWriter, partial_dirs
+from mv3dpose_ros.io.bag.writer import BagWriter, partial_dirs, writer_alive
 
 __all__ = ['bag_path_type', 'BagError', 'BagMessage', 'BagReader', 'BagWriter', 'check_bag',
            'CRC_TABLE', 'DEFAULT_STORAGE', 'deserialize', 'get_typestore', 'is_bag',
            'make_qos', 'MCAP_MAGIC', 'msg_dir', 'MSG_PACKAGE', 'normalise_type',
            'partial_dirs', 'PathLike', 'salvage', 'SalvageReport', 'serialize', 'STORAGES',
-           'temp_path_beside', 'TopicSummary', 'verify_bag', 'verify_mcap_chunks']
+           'temp_path_beside', 'TopicSummary', 'verify_bag', 'verify_mcap_chunks',
+           'writer_alive']

@@ -19,11 +19,15 @@ The bag is written into a hidden ``.NAME.partial-PID`` directory beside the targ
 into place only when closed without error: an interrupted or failed write never leaves a bag
 that looks complete. ``checkpoint`` closes the pending MCAP chunk and flushes it (sqlite3:
 commits), so a writer killed with SIGKILL leaves a partial directory in which everything up to
-the last checkpoint is intact (``partial_dirs`` finds them, ``salvage`` completes them). MCAP
-chunks and summary get their CRCs, sqlite3 bags their key table (``crc``).
+the last checkpoint is intact (``partial_dirs`` finds them, ``salvage`` completes them). A
+writer holds a ``flock`` on ``writer.lock`` in its directory while it writes, so that
+``writer_alive`` tells a running writer (this process's own included) from a dead one whose
+PID another process may have taken since. MCAP chunks and summary get their CRCs, sqlite3 bags
+their key table (``crc``).
 """
 
 from binascii import crc32
+import fcntl
 import os
 from pathlib import Path
 import shutil
@@ -85,22 +89,55 @@ def _partial_dir(path: Path, pid: Any) -> Path:
     return path.parent / f'.{path.name}.partial-{pid}'
 
 
+#: The file in a partial directory that its writer holds an exclusive ``flock`` on while it
+#: writes: the kernel drops the lock when the process dies (SIGKILL included), so a lock that
+#: can be taken means a dead writer, whatever process now has its PID.
+LOCK_NAME = 'writer.lock'
+
+
+def writer_alive(partial: PathLike) -> bool:
+    """
+    Tell whether the writer of a ``.NAME.partial-PID`` directory is still running.
+
+    Its lock (``LOCK_NAME``) decides: held means alive, this process's own writers included.
+    A directory without one (a writer of an older version, or one caught between creating the
+    directory and its lock) is alive while process PID exists, and always when PID is this
+    process.
+    """
+    d = Path(partial)
+    try:
+        fd = os.open(d / LOCK_NAME, os.O_RDONLY)
+    except FileNotFoundError:
+        pid = d.name.rsplit('-', 1)[-1]
+        if not pid.isdigit():
+            return False
+        if int(pid) == os.getpid():
+            return True
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return True
+    except OSError:
+        return True     # cannot tell (no read permission): leave it alone
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)    # releases the lock if this took it
+    return False
+
+
 def partial_dirs(path: PathLike) -> List[Path]:
     """Return the ``.NAME.partial-PID`` directories of ``path`` left by dead writers."""
     target = Path(path)
     found = []
     for d in sorted(target.parent.glob(_partial_dir(target, '*').name)):
         pid = d.name.rsplit('-', 1)[-1]
-        if not pid.isdigit() or not d.is_dir():
-            continue
-        try:
-            os.kill(int(pid), 0)
-            alive = int(pid) != os.getpid()
-        except ProcessLookupError:
-            alive = False
-        except PermissionError:
-            alive = True
-        if not alive:
+        if pid.isdigit() and d.is_dir() and not writer_alive(d):
             found.append(d)
     return found
 
@@ -130,9 +167,16 @@ class BagWriter:
         self._tmp_root = _partial_dir(self.path, os.getpid())
         shutil.rmtree(self._tmp_root, ignore_errors=True)
         self._tmp_root.mkdir()
-        self._writer = _Writer(self._tmp_root / self.path.name, version=9,
-                               storage_plugin=_PLUGINS[storage])
-        self._writer.open()
+        self._lock = os.open(self._tmp_root / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)   # held until close / abort
+        try:
+            self._writer = _Writer(self._tmp_root / self.path.name, version=9,
+                                   storage_plugin=_PLUGINS[storage])
+            self._writer.open()
+        except BaseException:
+            shutil.rmtree(self._tmp_root, ignore_errors=True)
+            self._release_lock()
+            raise
         self._conns: Dict[str, Any] = {}
         self.counts: Dict[str, int] = {}
         self._closed = False
@@ -207,6 +251,7 @@ class BagWriter:
             raise
         finally:
             shutil.rmtree(self._tmp_root, ignore_errors=True)
+            self._release_lock()
             self._closed = True
         return self.path
 
@@ -221,3 +266,9 @@ class BagWriter:
         except Exception:  # noqa: B902 - closing a half-written file may fail; it is deleted
             pass
         shutil.rmtree(self._tmp_root, ignore_errors=True)
+        self._release_lock()
+
+    def _release_lock(self) -> None:
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
