@@ -44,7 +44,7 @@ setup(
         'console_scripts': [
             'mv3dpose = mv3dpose_ros.cli:main',
             'pose2d_node = mv3dpose_ros.nodes.pose2d.node:main',
-            'fusion_node = mv3dpose_ros.nodes.fusion_node:main',
+            'fusion_node = mv3dpose_ros.nodes.fusion.node:main',
             'mv3dpose_bringup = mv3dpose_ros.nodes.bringup:main',
             'mv3dpose_image_publisher = mv3dpose_ros.nodes.image_publisher:main',
             'mv3dpose_foxglove_view = mv3dpose_ros.nodes.foxglove_view:main',

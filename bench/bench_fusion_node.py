@@ -342,7 +342,7 @@ def limits(cams: int = 4, persons: int = 2000, rate: float = 30.0) -> None:
     import rclpy
     from rclpy.parameter import Parameter
     from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
-    from mv3dpose_ros.nodes.fusion_node import FusionNode
+    from mv3dpose_ros.nodes.fusion.node import FusionNode
     import tempfile
     scene = _scene(cams, 3, 2, rate, 0)
     rig = os.path.join(tempfile.mkdtemp(), 'rig.yaml')

@@ -55,7 +55,7 @@ the package source and share directories.
 
 # (title, module, class, shipped params file and its section, note, overrides as name: value)
 NODES: List[Tuple[str, str, str, str, str, str, Dict[str, Any]]] = [
-    ('fusion_node', 'mv3dpose_ros.nodes.fusion_node', 'FusionNode', 'config/fusion.yaml', '/**',
+    ('fusion_node', 'mv3dpose_ros.nodes.fusion.node', 'FusionNode', 'config/fusion.yaml', '/**',
      'Every `FusionConfig` field is a `fusion.*` parameter and every `SyncConfig` field a '
      "`sync.*` one, declared with the field's comment as its description. What the thresholds "
      'mean in practice, and why they are where they are: [design.md](design.md); what '

@@ -89,7 +89,7 @@ class Harness:
     """A FusionNode and a probe node (publishers per camera, output subscribers)."""
 
     def __init__(self, scene, rig_path, markers=False, **params):
-        from mv3dpose_ros.nodes.fusion_node import FusionNode
+        from mv3dpose_ros.nodes.fusion.node import FusionNode
         self.scene = scene
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
@@ -458,7 +458,7 @@ def test_fusion_node_process_matches_fusion_step(scene, rig_path, tmp_path):
 
 
 def test_bad_configuration_fails_fast_with_clear_error(rig_path, tmp_path):
-    cmd = [sys.executable, '-m', 'mv3dpose_ros.nodes.fusion_node', '--ros-args', '-p',
+    cmd = [sys.executable, '-m', 'mv3dpose_ros.nodes.fusion.node', '--ros-args', '-p',
            f'rig_config:={rig_path}', '-p', 'camera_ids:=[cam_01, cam_99]']
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert res.returncode == 2

@@ -45,7 +45,7 @@ def rig(tmp_path_factory):
 
 def node_from(args):
     """Build a FusionNode from ``--ros-args ...`` parsed by rcl; return its read-back state."""
-    from mv3dpose_ros.nodes.fusion_node import FusionNode
+    from mv3dpose_ros.nodes.fusion.node import FusionNode
     ctx = rclpy.Context()
     rclpy.init(args=['fusion_node', '--ros-args'] + list(args), context=ctx)
     try:
@@ -138,7 +138,7 @@ def test_unknown_rig_key_named_with_the_closest_valid_key(rig, tmp_path):
 
 
 def test_error_message_recommends_an_override_that_works(rig, tmp_path):
-    from mv3dpose_ros.nodes.fusion_node import ConfigError
+    from mv3dpose_ros.nodes.fusion.node import ConfigError
     empty = write(tmp_path, 'empty_rig.yaml', {'/**': {'ros__parameters': {'rig_config': ''}}})
     with pytest.raises(ConfigError, match=r'-p rig_config:=') as info:
         node_from(['--params-file', FUSION_YAML, '--params-file', empty])

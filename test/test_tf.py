@@ -229,7 +229,7 @@ class NodeRun:
     """A real FusionNode plus a probe in one context; the probe publishes Pose2Sim frames."""
 
     def __init__(self, shared_data, **params):
-        from mv3dpose_ros.nodes.fusion_node import FusionNode
+        from mv3dpose_ros.nodes.fusion.node import FusionNode
         self.feed = Pose2Sim(shared_data, frames=30)
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
@@ -348,7 +348,7 @@ def test_extrinsics_from_tf_replace_the_rig_poses(fake_tf2, node_run, shared_dat
 @pytest.mark.ros
 def test_extrinsics_from_tf_missing_frame_is_a_clear_config_error(
         fake_tf2, node_run, shared_data):
-    from mv3dpose_ros.nodes.fusion_node import ConfigError
+    from mv3dpose_ros.nodes.fusion.node import ConfigError
     feed = Pose2Sim(shared_data, frames=1)
     for tf in camera_transforms(feed.cameras, Header(frame_id='map')):
         if tf.child_frame_id != 'cam_03_optical_frame':
@@ -372,6 +372,6 @@ def test_without_tf2_the_node_runs_and_says_once_that_tf_is_off(no_tf2, node_run
 
 @pytest.mark.ros
 def test_without_tf2_extrinsics_from_tf_is_refused(no_tf2, node_run):
-    from mv3dpose_ros.nodes.fusion_node import ConfigError
+    from mv3dpose_ros.nodes.fusion.node import ConfigError
     with pytest.raises(ConfigError, match='tf2_ros is not importable'):
         node_run(extrinsics_source='tf')

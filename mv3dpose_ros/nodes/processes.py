@@ -209,7 +209,7 @@ def rig_processes(params_files: Sequence[str] = DEFAULT_PARAMS, rig: Optional[st
                             {**own, 'camera_id': cam}) for cam in cams]
     if fusion:
         out.append(ProcessSpec('fusion_node', 'fusion_node', 'fusion_node',
-                               'mv3dpose_ros.nodes.fusion_node', parameters={
+                               'mv3dpose_ros.nodes.fusion.node', parameters={
                                    **fusion_over, 'rig_config': rig_path, 'camera_ids': cams,
                                    'input_topic': persons}))
     if foxglove_port is not None:

@@ -20,9 +20,9 @@ publication policy, idle steps, coasting and resets, the same object ``mv3dpose 
 runs): per-camera subscriptions feed it (header stamps only), and the tracks it gives are
 published as ``~/tracks`` (``TrackedSkeletonArray``, stamped with the set's capture time, in
 the world frame), ``~/markers`` (RViz, only when subscribed), a latched ``~/skeleton_info``
-and ``/diagnostics`` (``ros.fusion_diagnostics``). Parameters are the fields of
-``ros.fusion_config.FusionNodeParams``. Every input is validated first
-(``ros.inputs.PersonsInputCheck``); a bad message is dropped with a rate-limited log line
+and ``/diagnostics`` (``.diagnostics``). Parameters are the fields of
+``.config.FusionNodeParams``. Every input is validated first
+(``.inputs.PersonsInputCheck``); a bad message is dropped with a rate-limited log line
 naming the camera, topic and reason, and counted in the diagnostics, so it can neither stop
 the node nor reach the tracker.
 
@@ -44,14 +44,14 @@ from mv3dpose_ros.core.fusion.pipeline import Fusion
 from mv3dpose_ros.core.geometry.camera import CalibrationError
 from mv3dpose_ros.core.live.loop import IDLE_STEP_S, LiveFusion, LiveLog, Publication
 from mv3dpose_ros.core.types import NS_PER_S
+from mv3dpose_ros.nodes.fusion.config import (check_setup, ConfigError, dynamic_value_problem,
+                                              FusionNodeParams)
+from mv3dpose_ros.nodes.fusion.diagnostics import FusionStatus
+from mv3dpose_ros.nodes.fusion.inputs import camera_from_info, CameraInputStats, PersonsInputCheck
+from mv3dpose_ros.nodes.fusion.log_bridge import RosLogHandler
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, RateLimitedLog
 from mv3dpose_ros.ros.frames import Headings, pose_array_cdr, root_poses
-from mv3dpose_ros.ros.fusion_config import (check_setup, ConfigError, dynamic_value_problem,
-                                            FusionNodeParams)
-from mv3dpose_ros.ros.fusion_diagnostics import FusionStatus
-from mv3dpose_ros.ros.inputs import camera_from_info, CameraInputStats, PersonsInputCheck
-from mv3dpose_ros.ros.log_bridge import RosLogHandler
 from mv3dpose_ros.ros.markers import tracks_to_markers_cdr
 from mv3dpose_ros.ros.messages import (InvalidMessage, ns_to_stamp, skeleton_info_msg, stamp_to_ns,
                                        tracks_to_cdr)

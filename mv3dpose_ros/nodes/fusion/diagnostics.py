@@ -19,7 +19,7 @@ One status per camera input, then the synchroniser, tracking, calibration and cl
 with the figures the node's tests and the benches read.
 
 ``FusionStatus`` reads the node's live core (``core.live.loop.LiveFusion``), its per-camera input
-statistics (``ros.inputs.CameraInputStats``) and the output windows it keeps (latency,
+statistics (``.inputs.CameraInputStats``) and the output windows it keeps (latency,
 processing, output rate); a WARN names what changed since the previous cycle.
 """
 
@@ -30,9 +30,9 @@ from typing import Any, Callable, Dict, List, Sequence, Tuple
 from mv3dpose_ros.core.diagnostic_keys import FusionKeys as K, FusionStatusNames as N
 from mv3dpose_ros.core.live.loop import LiveFusion
 from mv3dpose_ros.core.types import NS_PER_S, TrackState
+from mv3dpose_ros.nodes.fusion.inputs import CameraInputStats
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
                                           WARN, WindowStats)
-from mv3dpose_ros.ros.inputs import CameraInputStats
 
 
 class FusionStatus:
