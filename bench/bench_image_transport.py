@@ -21,7 +21,7 @@ subscriber process (raw subscription, as pose2d_node) counts what arrives. Run o
 DDS's built-in transports and once with ``config/fastdds_shm.xml`` (what env.sh and
 mv3dpose_bringup apply), and print both. Each side also reports its CPU time per image.
 Both run with the malloc setting the image nodes use (transparent huge pages for image-sized
-buffers, ``mv3dpose_ros/ros/memory.py``). ``--buffers`` repeats the shared-memory pair with
+buffers, ``mv3dpose_ros/ros/system/memory.py``). ``--buffers`` repeats the shared-memory pair with
 glibc's defaults (a fresh 4 KiB-page ``mmap`` per 6 MB buffer) and with 6 MB buffers kept in
 the heap (``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TRIM_THRESHOLD_``; see docs/rig.md, "HD images
 and the CPU", for why the nodes do not do that), to show what the page faults cost:
@@ -36,7 +36,7 @@ import sys
 import time
 from typing import Tuple
 
-from mv3dpose_ros.ros.memory import OPT_OUT, thp_mode, with_hugepages
+from mv3dpose_ros.ros.system.memory import OPT_OUT, thp_mode, with_hugepages
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FRAME = os.path.join(os.path.dirname(ROOT), 'shared', 'data', 'panoptic_demo', '00_03',
@@ -123,7 +123,7 @@ def run_pair(args: argparse.Namespace, profile: str,
     """
     Run a subscriber and a publisher process; return (arrived, sub, pub CPU ms/image).
 
-    ``malloc``: ``hugepages`` as the nodes run (ros/memory.py), ``glibc`` glibc's defaults,
+    ``malloc``: ``hugepages`` as the nodes run (ros/system/memory.py), ``glibc`` glibc's defaults,
     ``heap`` 6 MB buffers kept in the heap (the variant the nodes do not use).
     """
     env = dict(os.environ)

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Transparent huge pages for image-sized buffers (ros/memory.py): env logic, effect, re-exec."""
+"""Transparent huge pages for image buffers (ros.system.memory): env logic, effect, re-exec."""
 
 import json
 import os
@@ -20,8 +20,8 @@ import subprocess
 import sys
 import textwrap
 
-from mv3dpose_ros.ros import memory
-from mv3dpose_ros.ros.memory import OPT_OUT, thp_mode, TUNABLE, with_hugepages
+from mv3dpose_ros.ros.system import memory
+from mv3dpose_ros.ros.system.memory import OPT_OUT, thp_mode, TUNABLE, with_hugepages
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -84,7 +84,7 @@ def test_reexec_keeps_pid_and_arguments_and_happens_once(tmp_path):
     script.write_text(textwrap.dedent(f"""
         import json, os, sys
         sys.path.insert(0, {ROOT!r})
-        from mv3dpose_ros.ros.memory import reexec_with_hugepages
+        from mv3dpose_ros.ros.system.memory import reexec_with_hugepages
         print(json.dumps([os.getpid(), sys.argv[1:], os.environ.get('GLIBC_TUNABLES')]),
               flush=True)
         reexec_with_hugepages()

@@ -21,8 +21,8 @@ import subprocess
 import sys
 import time
 
-from mv3dpose_ros.ros.shm import clean_stale_files, is_locked, SHM_DIR, stale_files
-from mv3dpose_ros.ros.shm import uses_fast_dds
+from mv3dpose_ros.ros.system.shm import clean_stale_files, is_locked, SHM_DIR, stale_files
+from mv3dpose_ros.ros.system.shm import uses_fast_dds
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -39,8 +39,8 @@ output (a rig with a silently missing camera is worse than a clear stop), unless
 restarts it: after 1 s, and after twice the last delay (up to 30 s) while it keeps exiting
 within 30 s of its start, so a node that cannot start does not restart in a tight loop; the
 others are watched meanwhile. Before starting the nodes, and before each restart, it removes
-the Fast DDS shared-memory files in /dev/shm of processes that are gone (``ros/shm.py``; 64 MB
-per killed process that published images), unless ``--keep-shm``.
+the Fast DDS shared-memory files in /dev/shm of processes that are gone (``ros/system/shm.py``;
+64 MB per killed process that published images), unless ``--keep-shm``.
 
 Names: ``{camera}`` in ``--namespace`` and ``--image-topic`` is the camera's ROS name
 (``ros/names.py``: ``00_03`` -> ``cam00_03``); both are validated before anything starts. The
@@ -63,9 +63,9 @@ from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 from mv3dpose_ros.nodes.processes import (DEFAULT_IMAGE_TOPIC, DEFAULT_NAMESPACE,
                                           DEFAULT_PARAMS, parse_assignments, PlanError,
                                           ProcessSpec, rig_processes)
-from mv3dpose_ros.ros.memory import with_hugepages
 from mv3dpose_ros.ros.params import package_search_dirs, resolve_path
-from mv3dpose_ros.ros.shm import clean_stale_files, SHM_DIR, uses_fast_dds
+from mv3dpose_ros.ros.system.memory import with_hugepages
+from mv3dpose_ros.ros.system.shm import clean_stale_files, SHM_DIR, uses_fast_dds
 import yaml
 
 DDS_PROFILE = 'config/fastdds_shm.xml'
@@ -113,7 +113,7 @@ class Plan:
 
 def _dds_env(profile: Optional[str], search: Sequence[str]) -> Tuple[Dict[str, str], str]:
     """Return the children's environment with the Fast DDS profile applied, and its path."""
-    env = with_hugepages(os.environ)       # 6 MB images with 2 MiB page faults (ros/memory.py)
+    env = with_hugepages(os.environ)       # 6 MB images, 2 MiB page faults (ros/system/memory.py)
     env['PYTHONUNBUFFERED'] = '1'          # child output is forwarded line by line
     if profile is None:
         profile = next((env[v] for v in PROFILE_VARS if env.get(v)), DDS_PROFILE)
@@ -190,7 +190,7 @@ class Supervisor:
                  f'{" ".join(shlex.quote(a) for a in self.commands[name])}')
 
     def remove_stale_shm(self) -> None:
-        """Remove Fast DDS shared memory left by killed processes (``ros/shm.py``); say so."""
+        """Remove Fast DDS shared memory left by killed processes (``ros.system.shm``); say so."""
         if not self.clean_shm:
             return
         removed, freed = clean_stale_files()

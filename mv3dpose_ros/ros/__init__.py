@@ -13,7 +13,9 @@
 # limitations under the License.
 
 """
-ROS adapters below the nodes: messages, CDR codecs, names, QoS, parameters, diagnostics, TF.
+What any node uses: messages, CDR codecs, names, QoS, parameters, diagnostics, TF, spinning.
+
+The parts of one node live with it (``nodes.fusion``, ``nodes.pose2d``).
 
 - :mod:`.names`: camera names -> ROS names, and the per-camera topics (``image_topic``,
   ``persons_topic``, ...) every node, command and launch file uses.
@@ -29,15 +31,9 @@ ROS adapters below the nodes: messages, CDR codecs, names, QoS, parameters, diag
 - :mod:`.qos`: the package's QoS profiles and incompatible-QoS reporting.
 - :mod:`.subscribers`: waiting for subscribers before publishing: which topics, and saying so.
 - :mod:`.params`: parameter declaration with descriptors, from core config dataclasses.
-- :mod:`.fusion_config`: fusion_node's parameters as config dataclasses, and their checks.
-- :mod:`.inputs`: fusion_node's per-camera input statistics and ``Person2DArray`` checks.
-- :mod:`.image_intake`: a raw image subscription a worker thread takes from when it is free.
-- :mod:`.rig_rate`: the rig-rate handshake of pose2d_node's auto mode.
 - :mod:`.diagnostics`: a small ``/diagnostics`` publisher with diagnostic_updater's keys.
-- :mod:`.fusion_diagnostics`: fusion_node's ``/diagnostics`` statuses.
-- :mod:`.pose2d_diagnostics`: pose2d_node's ``/diagnostics`` statuses, one per camera.
-- :mod:`.log_bridge`: the core's Python ``logging`` forwarded to a node's ROS logger.
-- :mod:`.spin`: spinning a node's executor until the process is asked to stop.
-- :mod:`.memory`: transparent huge pages for the image buffers of image-moving processes.
-- :mod:`.shm`: Fast DDS shared-memory files left behind by processes that are gone.
+- :mod:`.spin`: spinning a node's executor until the process is asked to stop; every node's
+  ``main`` (``run_node``).
+- :mod:`.system`: OS and Fast DDS helpers of the image-moving processes: huge pages for the
+  image buffers, stale shared-memory files.
 """

@@ -18,7 +18,7 @@ import os
 import sys
 from typing import Any, Callable, List, Optional, Tuple, Type
 
-from mv3dpose_ros.ros.memory import reexec_with_hugepages
+from mv3dpose_ros.ros.system.memory import reexec_with_hugepages
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 
@@ -61,7 +61,7 @@ def run_node(prog: str, make_node: Callable[[Any], Any], args: Optional[List[str
 
     The ``main`` of every node. ``args`` None is a console script's run: ``sys.argv``, and,
     with ``hugepages``, the process first re-executes itself with huge-page friendly malloc
-    settings (ros/memory.py). ``make_node`` builds the node from what ``parse_cli`` makes of
+    settings (ros/system/memory.py). ``make_node`` builds the node from what ``parse_cli`` makes of
     the arguments that are not ROS arguments (no ``parse_cli``: ``[]``); ``spin(node,
     executor)`` runs it (default: ``spin_until_shutdown``). Exit status:
 
@@ -77,7 +77,7 @@ def run_node(prog: str, make_node: Callable[[Any], Any], args: Optional[List[str
     hang under that thread until SIGKILL.
     """
     if args is None and hugepages:
-        reexec_with_hugepages()         # 6 MB images with 2 MiB page faults (ros/memory.py)
+        reexec_with_hugepages()         # 6 MB images with 2 MiB page faults (ros/system/memory.py)
     argv = sys.argv if args is None else args
     rclpy.init(args=argv)
     node = executor = None

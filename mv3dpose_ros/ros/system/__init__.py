@@ -1,0 +1,21 @@
+# Copyright 2026 The mv3dpose_ros Authors
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What the image-moving processes need of the operating system and of Fast DDS, outside ROS's API.
+
+- :mod:`.memory`: transparent huge pages for the image buffers (glibc's malloc tunable in the
+  environment, and a node's one re-execution with it).
+- :mod:`.shm`: Fast DDS shared-memory files in /dev/shm left behind by processes that are gone.
+"""
