@@ -171,8 +171,8 @@ def test_core_stages_import_downward():
 def test_every_core_stage_has_a_map_and_all():
     """Each stage package names its modules in its docstring and lists them in ``__all__``."""
     core = os.path.join(PACKAGE, 'core')
-    stages = sorted(d for d in os.listdir(core) if os.path.isfile(os.path.join(core, d,
-                                                                                 '__init__.py')))
+    stages = sorted(d for d in os.listdir(core)
+                    if os.path.isfile(os.path.join(core, d, '__init__.py')))
     assert set(stages) == {s for floor in CORE_STAGES for s in floor} - {''}
     problems = []
     for stage in stages:
@@ -267,3 +267,39 @@ def test_every_module_is_in_its_package_map():
             if f':mod:`.{module}`' not in doc:
                 missing.append(f'mv3dpose_ros/{package}/__init__.py does not name {module}')
     assert not missing, '\n'.join(missing)
+
+
+#: The most lines and instance attributes a class under ``core/`` may have: past them it
+#: holds several ideas, each of which deserves its own name.
+MAX_CLASS_LINES, MAX_CLASS_ATTRIBUTES = 400, 20
+
+
+def _instance_attributes(cls: ast.ClassDef) -> set:
+    """Return the names ``x`` of every ``self.x = ...`` (plain, augmented, unpacked) in ``cls``."""
+    names = set()
+    for node in ast.walk(cls):
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, (ast.AugAssign, ast.AnnAssign)) else []
+        for target in targets:
+            for t in ast.walk(target):
+                if isinstance(t, ast.Attribute) and isinstance(t.value, ast.Name) \
+                        and t.value.id == 'self' and isinstance(t.ctx, ast.Store):
+                    names.add(t.attr)
+    return names
+
+
+def test_no_core_class_over_400_lines_or_20_attributes():
+    """Every class of the algorithm is one idea: at most 400 lines and 20 instance attributes."""
+    found = []
+    for module, path in _modules():
+        if _package_of(module) != 'core':
+            continue
+        for node in ast.walk(ast.parse(open(path).read())):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            lines = node.end_lineno - node.lineno + 1
+            attributes = len(_instance_attributes(node))
+            if lines > MAX_CLASS_LINES or attributes > MAX_CLASS_ATTRIBUTES:
+                found.append(f'{os.path.relpath(path, ROOT)}:{node.lineno}: {node.name} has '
+                             f'{lines} lines and {attributes} instance attributes')
+    assert not found, '\n'.join(found)

@@ -22,12 +22,40 @@ NaN never leaves the core: the ROS and file adapters turn it into explicit valid
 
 from dataclasses import dataclass, field
 import enum
-from typing import Optional, Tuple
+from typing import Optional, Tuple, Union
 
 import numpy as np
 
 # Nanoseconds per second: stamps are int64 nanoseconds everywhere (ROS time, bags, the core).
 NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Stamp:
+    """
+    One instant: integer nanoseconds (what ROS, bags and the tracks' ``*_ns`` fields hold).
+
+    ``s`` is the same instant in seconds for arithmetic. Build stamps with ``Stamp.of``, the
+    one place where either form is derived from the other: a caller's own seconds are kept as
+    given (a frame index over a frame rate is exact in seconds, not in nanoseconds), so the
+    arithmetic on them does not move.
+    """
+
+    ns: int
+    s: float
+
+    @classmethod
+    def of(cls, seconds: 'Union[float, Stamp, None]' = None,
+           ns: Optional[int] = None) -> 'Stamp':
+        """Return the stamp of ``seconds`` and / or ``ns`` (the missing one derived)."""
+        if isinstance(seconds, Stamp):
+            return seconds if ns is None or int(ns) == seconds.ns else cls(int(ns), seconds.s)
+        if seconds is None:
+            if ns is None:
+                raise ValueError('Stamp.of needs seconds or nanoseconds')
+            return cls(int(ns), int(ns) / NS_PER_S)
+        seconds = float(seconds)
+        return cls(int(round(seconds * 1e9)) if ns is None else int(ns), seconds)
 
 
 class TrackState(enum.IntEnum):

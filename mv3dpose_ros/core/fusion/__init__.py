@@ -15,8 +15,17 @@
 """
 Stage 3, fusion: one synchronised set of 2D views in, the rig's tracks out.
 
+- :mod:`.pipeline`: ``Fusion``, whose ``step`` runs the stages below over one set's record.
+- :mod:`.config`: ``FusionConfig``, its checks, and the tracker's parameters drawn from it.
+- :mod:`.rig`: the rig's geometry, computed once per ``Fusion``.
+- :mod:`.record`: ``SetRecord``, what one step knows about its set, filled stage by stage.
 - :mod:`.association`: cross-view association of 2D poses (Tanke & Gall, Algorithm 1).
-- :mod:`.pipeline`: ``Fusion.step``, association, triangulation and tracking of one set.
+- :mod:`.reconstruction`: a set's candidate 3D poses: normalise, associate, triangulate, clean.
+- :mod:`.noise`: the detector's 2D noise on this rig and the joints' measurement variance.
+- :mod:`.views`: single-view and late-view ray updates of the tracks.
+- :mod:`.duplicates`: fragments start no track; two tracks of one person merge.
+- :mod:`.assembly`: the ``Track`` outputs and tombstones of a step.
 """
 
-__all__ = ['association', 'pipeline']
+__all__ = ['assembly', 'association', 'config', 'duplicates', 'noise', 'pipeline',
+           'reconstruction', 'record', 'rig', 'views']

@@ -243,7 +243,7 @@ class LiveFusion:
         # replay slower than real time) does not turn its next frames late.
         wait_ns = self.sync.max_wait_ns + \
             (self.sync.frame_period_ns or int(IDLE_STEP_S * NS_PER_S))
-        coast_ns = int(self.fusion.tracker.config.max_coast_s * NS_PER_S)
+        coast_ns = int(self.fusion.max_coast_s * NS_PER_S)
         if idle_ns <= max(wait_ns, coast_ns):
             return []
         if self._last_input_ns is not None and now_ns - self._last_input_ns <= coast_ns:
@@ -318,11 +318,11 @@ class LiveFusion:
             return
         period = sorted(self._set_steps_ns)[len(self._set_steps_ns) // 2] / NS_PER_S
         coast = max(self.fusion_config.max_coast_s, COAST_SET_PERIODS * period)
-        tracker = self.fusion.tracker.config
-        if abs(coast - tracker.max_coast_s) > 0.05 * tracker.max_coast_s:
+        now = self.fusion.max_coast_s
+        if abs(coast - now) > 0.05 * now:
             self.log.info(f'tracks coast {coast:.2f} s (sets every {period:.2f} s; '
                           f'fusion.max_coast_s {self.fusion_config.max_coast_s:g} s)')
-            tracker.max_coast_s = coast
+            self.fusion.max_coast_s = coast
 
     def _step(self, views: Mapping[str, Any], stamp_ns: int, stamp: Optional[float] = None,
               idle: bool = False) -> bool:

@@ -55,7 +55,7 @@ from typing import Callable, Optional, Union
 
 from mv3dpose_ros.core.assignment import gated_assignment
 from mv3dpose_ros.core.tracking.smoothing import JointKalman, KalmanUpdate
-from mv3dpose_ros.core.types import TrackState
+from mv3dpose_ros.core.types import Stamp, TrackState
 import numpy as np
 
 # Sums over x, y, z as a product with ones: several times cheaper than a last-axis sum of 3.
@@ -118,6 +118,8 @@ class Tracks:
     cameras: np.ndarray         # [T, C] bool, the cameras behind its matched 3D poses, together
     hits: np.ndarray            # [T] observations
     missed: np.ndarray          # [T] consecutive updates without observation
+    view_time: np.ndarray       # [T, C] s, the last stamp each camera saw it (-inf: never)
+    confidence: np.ndarray      # [T, J] detector confidence of each joint's last observation
 
     @classmethod
     def empty(cls, num_joints: int, num_cameras: int = 0) -> 'Tracks':
@@ -128,7 +130,8 @@ class Tracks:
                    first_seen_ns=np.zeros(0, dtype=np.int64),
                    last_observed_ns=np.zeros(0, dtype=np.int64), last_matched=np.zeros(0),
                    cameras=np.zeros((0, num_cameras), dtype=bool),
-                   hits=np.zeros(0, dtype=np.int64), missed=np.zeros(0, dtype=np.int64))
+                   hits=np.zeros(0, dtype=np.int64), missed=np.zeros(0, dtype=np.int64),
+                   view_time=np.zeros((0, num_cameras)), confidence=np.zeros((0, num_joints)))
 
     def __len__(self) -> int:
         """Return the number of tracks."""
@@ -137,6 +140,11 @@ class Tracks:
     def take(self, rows: np.ndarray) -> 'Tracks':
         """Return the tracks ``rows`` (index or mask) as a new ``Tracks``."""
         return Tracks(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
+
+    def concat(self, other: 'Tracks') -> 'Tracks':
+        """Return these tracks followed by ``other``."""
+        return Tracks(**{f.name: np.concatenate((getattr(self, f.name), getattr(other, f.name)))
+                         for f in fields(self)})
 
     def predicted(self, stamp: float, predict: bool = True,
                   horizon_s: float = np.inf) -> np.ndarray:
@@ -239,12 +247,12 @@ class Tracker:
         self._clear()
         return dropped
 
-    def update(self, poses: np.ndarray, stamp: float, can_birth: BirthRule = None,
+    def update(self, poses: np.ndarray, stamp: Union[float, Stamp], can_birth: BirthRule = None,
                variance: Optional[np.ndarray] = None, confirm_at_birth: BirthRule = None,
                stamp_ns: Optional[int] = None, cameras: Optional[np.ndarray] = None,
                sparse: bool = True) -> TrackUpdate:
         """
-        Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` seconds.
+        Match ``poses [D, J, 3]`` (NaN = missing joint) observed at ``stamp`` (s or ``Stamp``).
 
         Updates ``self.tracks`` (live tracks: matched, coasting, and new ones last) and returns
         which pose each live track took and the filtered joints. ``variance [D, J]`` is the
@@ -253,7 +261,7 @@ class Tracker:
         they have ``min_birth_joints`` joints; a new track is CONFIRMED at once where
         ``confirm_at_birth`` holds. Both rules may also be functions of the indices ``[N]`` of
         the candidate poses returning ``[N]`` booleans, so their work is only done when there
-        are any. ``stamp_ns`` is the same stamp in integer nanoseconds (default: rounded).
+        are any. ``stamp_ns``: see ``Stamp.of``.
         ``cameras [D, C]`` are the cameras behind each pose: a TENTATIVE track is confirmed by
         ``confirm_hits`` only once ``confirm_views`` cameras stood behind its poses, together
         (a person a loaded rig only sees in sets of two cameras, different pairs, confirms;
@@ -262,7 +270,8 @@ class Tracker:
         wait ``tentative_coast_s`` (a complete set that does not see it deletes it).
         """
         cfg = self.config
-        stamp_ns = int(round(stamp * 1e9)) if stamp_ns is None else int(stamp_ns)
+        at = Stamp.of(stamp, stamp_ns)
+        stamp = at.s
         self._stamp = stamp
         tr = self.tracks
         num_t, num_d = len(tr), len(poses)
@@ -312,7 +321,7 @@ class Tracker:
                 now = cameras[np.maximum(det, 0)] & hit[:, None]
             # this set's confirmations count its pose's cameras and the earlier ones', each
             # on its own; the union counts from the next observation on
-            self._observe(hit, stamp, stamp_ns, all_hit, now)
+            self._observe(hit, at, all_hit, now)
             if now is not None:
                 tr.cameras = tr.cameras | now
         if all_hit:                                 # the common case: nobody missed
@@ -344,7 +353,7 @@ class Tracker:
             if confirm_at_birth is not None:
                 confirm = _rule(confirm_at_birth, np.ones(len(new), dtype=bool), new)
             seen = cameras[new] if cameras is not None else None
-            live = _concat(live, self._births(len(new), stamp, stamp_ns, confirm, seen))
+            live = live.concat(self._births(len(new), at, confirm, seen))
             det = np.concatenate((det, new))
             previous = np.concatenate((kept, np.full(len(new), -1)))
             recovered = np.concatenate((recovered, np.zeros(len(new), dtype=np.int8)))
@@ -377,7 +386,7 @@ class Tracker:
         tr.velocity = velocity
         return out
 
-    def observe_views(self, rows: np.ndarray, stamp: float, stamp_ns: int,
+    def observe_views(self, rows: np.ndarray, stamp: Stamp,
                       located: Optional[np.ndarray] = None) -> None:
         """
         Count observations of tracks ``rows`` by single views, after their filters took them.
@@ -391,14 +400,14 @@ class Tracker:
         rows = np.asarray(rows, dtype=np.int64)
         tr = self.tracks
         if located is not None and len(located):
-            tr.last_matched[located] = np.maximum(tr.last_matched[located], stamp)
+            tr.last_matched[located] = np.maximum(tr.last_matched[located], stamp.s)
         if not len(rows):
             return
-        newer = tr.last_observed[rows] < stamp
+        newer = tr.last_observed[rows] < stamp.s
         now = rows[newer]
-        tr.last_observed[now] = stamp
-        tr.last_observed_ns[now] = stamp_ns
-        current = now[tr.missed[now] > 0] if self._stamp == stamp else now[:0]
+        tr.last_observed[now] = stamp.s
+        tr.last_observed_ns[now] = stamp.ns
+        current = now[tr.missed[now] > 0] if self._stamp == stamp.s else now[:0]
         tr.missed[current] = 0
         tr.hits[current] += 1
         earned = self._confirmable(tr.hits[current], tr.cameras[current].sum(axis=1))
@@ -437,7 +446,26 @@ class Tracker:
         self.filter.reindex(np.nonzero(keep)[0])
         return dead
 
-    def _births(self, n: int, stamp: float, stamp_ns: int, confirm: np.ndarray,
+    def add(self, poses: np.ndarray, stamp: Union[float, Stamp], variance: float,
+            confirmed: bool = True) -> np.ndarray:
+        """
+        Start tracks of ``poses [N, J, 3]`` beside the live ones (people located by other means).
+
+        Their joints start at ``poses`` with per-axis ``variance`` [m^2]; the other tracks'
+        filters see ``stamp`` without an observation. Returns the new tracks' ids.
+        """
+        at = Stamp.of(stamp)
+        poses = np.asarray(poses, dtype=float).reshape(-1, self.num_joints, 3)
+        num_t, num_n = len(self.tracks), len(poses)
+        self.tracks = self.tracks.concat(self._births(num_n, at, np.full(num_n, confirmed)))
+        self.filter.reindex(np.concatenate((np.arange(num_t), np.full(num_n, -1))))
+        z = np.full((num_t + num_n, self.num_joints, 3), np.nan)
+        z[num_t:] = poses
+        self.filter.update(z, np.full(z.shape[:2], float(variance)), at.s)
+        self.refresh(np.arange(num_t, num_t + num_n))
+        return self.tracks.ids[num_t:].copy()
+
+    def _births(self, n: int, stamp: Stamp, confirm: np.ndarray,
                 cameras: Optional[np.ndarray] = None) -> Tracks:
         if cameras is None:
             cameras = np.zeros((n, self.num_cameras), dtype=bool)
@@ -446,20 +474,23 @@ class Tracker:
         ids = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
         self.next_id += n
         return Tracks(ids=ids, state=state, pose=np.full((n, self.num_joints, 3), np.nan),
-                      velocity=np.full((n, 3), np.nan), first_seen=np.full(n, stamp),
-                      last_observed=np.full(n, stamp),
-                      first_seen_ns=np.full(n, stamp_ns, dtype=np.int64),
-                      last_observed_ns=np.full(n, stamp_ns, dtype=np.int64),
-                      last_matched=np.full(n, stamp), cameras=cameras,
-                      hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64))
+                      velocity=np.full((n, 3), np.nan), first_seen=np.full(n, stamp.s),
+                      last_observed=np.full(n, stamp.s),
+                      first_seen_ns=np.full(n, stamp.ns, dtype=np.int64),
+                      last_observed_ns=np.full(n, stamp.ns, dtype=np.int64),
+                      last_matched=np.full(n, stamp.s), cameras=cameras,
+                      hits=np.ones(n, dtype=np.int64), missed=np.zeros(n, dtype=np.int64),
+                      view_time=np.full((n, self.num_cameras), -np.inf),
+                      confidence=np.zeros((n, self.num_joints)))
 
-    def _observe(self, hit: np.ndarray, stamp: float, stamp_ns: int,
-                 all_hit: bool = False, cameras: Optional[np.ndarray] = None) -> None:
+    def _observe(self, hit: np.ndarray, stamp: Stamp, all_hit: bool = False,
+                 cameras: Optional[np.ndarray] = None) -> None:
         """
         Count the observation of the tracks ``hit`` (mask; ``all_hit``: all).
 
         ``cameras [T, C]``: the cameras of the poses matched now (for confirmation).
         """
+        stamp_ns, stamp = stamp.ns, stamp.s
         tr = self.tracks
         if all_hit:
             tr.hits = tr.hits + 1
@@ -491,8 +522,3 @@ def _rule(rule: BirthRule, mask: np.ndarray, index: Optional[np.ndarray] = None)
     elif rule is not None:
         mask &= rule if index is None else np.asarray(rule)[index]
     return mask
-
-
-def _concat(a: Tracks, b: Tracks) -> Tracks:
-    return Tracks(**{f.name: np.concatenate((getattr(a, f.name), getattr(b, f.name)))
-                     for f in fields(a)})
