@@ -92,6 +92,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--params', metavar='YAML',
                         help='FusionConfig fields: a flat mapping, or a ROS parameter file '
                              '(its fusion: section, e.g. config/fusion.yaml)')
+    parser.add_argument('--save-rig', metavar='PATH',
+                        help='write the rig in use at the end as a rig YAML (with the '
+                             "calibration watch's corrections, fusion.calibration_watch)")
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
 
 
@@ -137,17 +140,23 @@ def _progress(total: int, progress: bool):
         bar.close()
 
 
-def run_fusion(fusion, seq, fps: float, progress: bool = False
+def run_fusion(fusion, watch, seq, fps: float, progress: bool = False
                ) -> Iterator[Tuple[int, float, list]]:
     """
     Yield ``(frame, stamp, tracks)`` for every frame of ``seq`` through ``fusion.step``.
 
     Frame ``n`` is stamped ``n / fps`` s, exactly ``round(n * 1e9 / fps)`` ns in the tracks.
+    ``watch`` (``core.selfcal.watch.CalibrationWatch``) checks the rig set by set, as the live
+    core does; what it finds is logged as there.
     """
     with _progress(len(seq.frames), progress) as tick:
         for frame in seq.frames:
             stamp = frame / fps
-            yield frame, stamp, fusion.step(seq.read(frame), stamp, round(frame * 1e9 / fps))
+            tracks, events = watch.fused(fusion, seq.read(frame), stamp,
+                                         round(frame * 1e9 / fps))
+            for event in events:
+                (LOG.info if event.kind == 'agrees' else LOG.warning)(event.message)
+            yield frame, stamp, tracks
             tick()
 
 
@@ -178,7 +187,7 @@ def run_live(live, seq, fps: float, smoothed: bool = False, progress: bool = Fal
 
 def run(args) -> int:
     """Track, write the JSON Lines file, print a summary; return the exit code."""
-    from mv3dpose_ros.core.geometry.calibration import CalibrationError
+    from mv3dpose_ros.core.geometry.calibration import CalibrationError, save_rig_yaml
     from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
     from mv3dpose_ros.core.tracking.hindsight import settle_tracks
     from mv3dpose_ros.core.live.config import complete_live_config
@@ -186,6 +195,7 @@ def run(args) -> int:
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.core.tracking.smoothing import smooth_track_sequence
     from mv3dpose_ros.core.live.sync import SyncConfig
+    from mv3dpose_ros.core.selfcal.watch import CalibrationWatch, WatchConfig
     from mv3dpose_ros.core.types import JointState, TrackState
     from mv3dpose_ros.io.tracks_jsonl import TracksWriter
     import numpy as np
@@ -215,6 +225,7 @@ def run(args) -> int:
             live.start(cameras)
         else:
             fusion = Fusion(cameras, layout.name, config)
+            watch = CalibrationWatch(cameras, WatchConfig.of(config))
     except (CalibrationError, ValueError, FileNotFoundError, OSError, TypeError) as e:
         print(f'mv3dpose track: {e}', file=sys.stderr)
         return 2
@@ -233,7 +244,7 @@ def run(args) -> int:
             if live is not None:       # ~/tracks, or ~/tracks_smoothed with a lag
                 frames = run_live(live, seq, args.fps, lag > 0, progress)
             else:
-                frames = run_fusion(fusion, seq, args.fps, progress)
+                frames = run_fusion(fusion, watch, seq, args.fps, progress)
             if args.smooth == 'offline':
                 done = list(frames)
                 settled = settle_tracks([t for _, _, t in done], [s for _, s, _ in done],
@@ -255,6 +266,14 @@ def run(args) -> int:
         print(f'mv3dpose track: cannot write {args.output}: {e}', file=sys.stderr)
         return 1
     elapsed = time.perf_counter() - t0
+    if args.save_rig:
+        try:
+            save_rig_yaml(dict(live.cameras if live is not None else watch.cameras),
+                          args.save_rig)
+        except OSError as e:
+            print(f'mv3dpose track: cannot write {args.save_rig}: {e}', file=sys.stderr)
+            return 1
+        print(f'mv3dpose track: wrote the rig in use to {args.save_rig}', file=sys.stderr)
     med = f'{np.median(reproj):.1f} px' if reproj else 'n/a'
     print(f'mv3dpose track: wrote {len(seq)} frames to {args.output} in {elapsed:.2f} s '
           f'({1000 * elapsed / max(len(seq), 1):.2f} ms/frame); confirmed tracks: '

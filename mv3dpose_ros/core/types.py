@@ -28,6 +28,8 @@ import numpy as np
 
 # Nanoseconds per second: stamps are int64 nanoseconds everywhere (ROS time, bags, the core).
 NS_PER_S = 1_000_000_000
+#: What the calibration watch (core.selfcal.watch) does with a camera that turned.
+CALIBRATION_WATCH_MODES = ('off', 'warn', 'exclude', 'correct')
 
 
 @dataclass(frozen=True)

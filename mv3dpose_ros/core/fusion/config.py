@@ -23,6 +23,7 @@ the tracker's rig-dependent values.
 from dataclasses import asdict, dataclass
 
 from mv3dpose_ros.core.tracking.tracker import TrackerConfig
+from mv3dpose_ros.core.types import CALIBRATION_WATCH_MODES
 import numpy as np
 
 SMOOTHING_MODES = ('causal', 'none')
@@ -86,6 +87,11 @@ class FusionConfig:
     #                                         and it this long (not every sparse set sees a
     #                                         birth; a complete set without it deletes it)
     view_gate_chi2: float = 13.8            # ray innovation gate (chi-square, 2 dof, 99.9 %)
+    calibration_watch: str = 'correct'      # each camera's pose checked against the rig's
+    #                                         people (core.selfcal.watch): off, warn, exclude
+    #                                         (a turned camera left out until it agrees) or
+    #                                         correct (left out, then turned back)
+    calibration_watch_deg: float = 1.0      # rotation since its baseline that names a camera
 
     def validate(self) -> None:
         """Raise ValueError naming the first out-of-range field."""
@@ -96,11 +102,12 @@ class FusionConfig:
                         'tracking_recovery_gate_m', 'max_coast_s', 'max_gap_s',
                         'confirm_at_birth_ratio', 'publish_coast_s', 'noise_gain',
                         'tentative_coast_s', 'view_only_s')
+        positive += ('calibration_watch_deg',)
         at_least_one = ('min_pose_joints', 'min_shared_joints', 'max_reference_views',
                         'min_candidate_joints', 'confirm_hits', 'min_birth_joints',
                         'min_birth_cameras_in_view', 'reinit_after', 'view_min_joints')
         for name, value in asdict(self).items():
-            if isinstance(value, bool) or name == 'smoothing':
+            if isinstance(value, bool) or name in ('smoothing', 'calibration_watch'):
                 continue
             if not isinstance(value, (int, float)) or not np.isfinite(value):
                 raise ValueError(f'FusionConfig.{name} must be a finite number, got {value!r}')
@@ -113,6 +120,9 @@ class FusionConfig:
         if self.min_views < 2:
             raise ValueError(f'FusionConfig.min_views must be >= 2 (triangulation needs two '
                              f'views), got {self.min_views}')
+        if self.calibration_watch not in CALIBRATION_WATCH_MODES:
+            raise ValueError(f'FusionConfig.calibration_watch must be one of '
+                             f'{CALIBRATION_WATCH_MODES}, got {self.calibration_watch!r}')
         if self.smoothing not in SMOOTHING_MODES:
             raise ValueError(f'FusionConfig.smoothing must be one of {SMOOTHING_MODES}, '
                              f'got {self.smoothing!r}')

@@ -105,6 +105,10 @@ class Fusion:
         self._last: Optional[SetRecord] = None          # the record of the last step
 
     # ------------------------------------------------------------------ public API
+    def replace_camera(self, camera: Camera) -> None:
+        """Use ``camera`` (a new pose of a camera of the rig, same name) from the next step on."""
+        self._rig.replace_camera(camera)
+
     def reset(self) -> List[Track]:
         """Clear all tracks and filters; return their DELETED tombstones (ids keep counting)."""
         dropped = self._assembly.tombstones(self.tracker.reset())

@@ -73,6 +73,25 @@ class Rig:
             centres=np.array([c.center for c in cams]), rotations=np.array([c.R for c in cams]),
             depth_rows=np.stack([np.append(c.R[2], c.t[2]) for c in cams]))
 
+    def replace_camera(self, camera: Camera) -> None:
+        """
+        Put ``camera`` in the place of the rig's camera of its name (a corrected pose).
+
+        Every array is rewritten in place: the parts of a ``Fusion`` that hold them see the
+        new geometry at once, and nothing else changes.
+        """
+        if camera.name not in self.index:
+            raise ValueError(f'camera {camera.name!r} is not in the rig ({", ".join(self.names)})')
+        cams = dict(zip(self.names, self.cameras))
+        cams[camera.name] = camera
+        new = Rig.of(cams)
+        for name, value in vars(new).items():
+            old = getattr(self, name)
+            if isinstance(old, np.ndarray):
+                np.copyto(old, value)
+            elif isinstance(old, list):
+                old[:] = value
+
     def __len__(self) -> int:
         """Return the number of cameras."""
         return len(self.names)

@@ -25,7 +25,7 @@ Points whose normalised radius lies beyond the range where the radial polynomial
 points behind the camera, so a person outside a camera's field of view never shows up in it.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence, Tuple
 
 import cv2
@@ -325,6 +325,25 @@ def essential_matrices(cameras: Sequence[Camera]) -> np.ndarray:
             if a != b:
                 table[a, b] = essential_matrix(cam_a, cam_b)
     return table
+
+
+def turned(camera: Camera, rotation: np.ndarray) -> Camera:
+    """Return ``camera`` turned by ``rotation`` (in its own frame) about its centre."""
+    return replace(camera, R=rotation @ camera.R, t=rotation @ camera.t)
+
+
+def turn_keypoints(camera: Camera, uv: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """
+    Return pixels ``uv [..., 2]`` as the camera would see them after turning by ``rotation``.
+
+    A camera that turns about its centre moves every image point by the homography of the
+    rotation (what a kicked tripod does to the keypoints); distortion applies on both sides.
+    NaN stays NaN.
+    """
+    xy = camera.undistort(uv)
+    rays = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1) @ rotation.T
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return camera.distort(rays[..., :2] / np.where(rays[..., 2:] > 0, rays[..., 2:], np.nan))
 
 
 def fundamental_matrix(a: Camera, b: Camera) -> np.ndarray:

@@ -24,6 +24,10 @@ policy (``core.live.output.LiveOutput``), and the rules between them that a live
   steps) beyond ``fusion.max_coast_s`` when sets come slower (an overloaded rig);
 * once no set and no input came for ``max_coast_s``, ``idle_step`` ages the tracks with empty
   steps, so they go COASTING and are DELETED as with empty sets;
+* after each set, the calibration watch (``core.selfcal.watch``) compares every camera's pose
+  with where the others put the people; a camera it names is left out of the sets (modes
+  exclude and correct) and, in mode correct, turned back into the rig
+  (``CalibrationWatch.fused``; ``LiveLog.rig`` hears of every such change);
 * ``reset`` (the node clock jumped back, ``~/reset``, a sustained stamp jump found by the
   synchroniser) clears synchroniser and tracks and publishes the tombstones of the published
   tracks; a failing ``Fusion.step`` resets the tracks and is counted.
@@ -45,6 +49,7 @@ from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
 from mv3dpose_ros.core.live.clock_offsets import ClockCheck
 from mv3dpose_ros.core.live.output import LiveOutput
 from mv3dpose_ros.core.live.sync import StreamSynchronizer, SyncConfig, SyncedSet
+from mv3dpose_ros.core.selfcal.watch import CalibrationWatch, WatchConfig, WatchEvent
 from mv3dpose_ros.core.skeleton import get_layout
 from mv3dpose_ros.core.types import NS_PER_S, Track, TrackState
 import numpy as np
@@ -94,6 +99,8 @@ class LiveLog:
     info: Callable[[str], None] = LOG.info
     warning: Callable[[str], None] = LOG.warning
     throttled: Callable[[str, str], None] = lambda key, text: LOG.warning(text)  # key, text
+    #: The rig in use changed (the calibration watch corrected a camera): every camera.
+    rig: Callable[[Mapping[str, Any]], None] = lambda cameras: None
 
 
 class LiveFusion:
@@ -102,13 +109,19 @@ class LiveFusion:
     def __init__(self, camera_ids: Sequence[str], layout: Any, sync_config: SyncConfig,
                  fusion_config: FusionConfig, publish_tentative: bool = False, lag: int = 0,
                  log: Optional[LiveLog] = None,
-                 wants_smoothed: Callable[[], bool] = lambda: True) -> None:
-        """Create the synchroniser; ``start`` adds the fusion once the cameras are known."""
+                 wants_smoothed: Callable[[], bool] = lambda: True,
+                 watch_config: Optional[WatchConfig] = None) -> None:
+        """
+        Create the synchroniser; ``start`` adds the fusion once the cameras are known.
+
+        ``watch_config``: the calibration watch's (default: what ``fusion_config`` asks for).
+        """
         self.camera_ids = tuple(camera_ids)
         self.layout = get_layout(layout)
         self.sync_config, self.fusion_config = sync_config, fusion_config
         self.sync = StreamSynchronizer(self.camera_ids, sync_config, clock=_no_clock)
         self.fusion: Optional[Fusion] = None
+        self.watch = CalibrationWatch.unstarted(watch_config or WatchConfig.of(fusion_config))
         self.log = log or LiveLog()
         #: Whether a fixed-lag estimate is wanted now (the node: ~/tracks_smoothed has a
         #: subscriber); its window is kept regardless.
@@ -143,9 +156,15 @@ class LiveFusion:
 
     def start(self, cameras: Mapping[str, Any]) -> Fusion:
         """Build the fusion for ``cameras`` (calibration known); return it."""
-        self.fusion = Fusion({c: cameras[c] for c in self.camera_ids}, self.layout,
-                             self.fusion_config)
+        rig = {c: cameras[c] for c in self.camera_ids}
+        self.fusion = Fusion(rig, self.layout, self.fusion_config)
+        self.watch = CalibrationWatch(rig, self.watch.config)
         return self.fusion
+
+    @property
+    def cameras(self) -> Mapping[str, Any]:
+        """Return the rig in use (the calibration watch's corrections included)."""
+        return self.watch.cameras
 
     # ------------------------------------------------------------------ inputs
     def heard(self, now_ns: int) -> None:
@@ -273,6 +292,8 @@ class LiveFusion:
 
     def _late(self, camera: str, poses: np.ndarray, stamp_ns: int) -> bool:
         """Fold a message that missed its set into the tracks at its own stamp."""
+        if camera in self.watch.excluded():
+            return False
         try:
             used = self.fusion.update_view(camera, poses, stamp_ns / NS_PER_S, stamp_ns)
         except Exception as exc:  # noqa: B902 - a core failure must not stop the node
@@ -330,7 +351,7 @@ class LiveFusion:
         stamp = stamp_ns / NS_PER_S if stamp is None else stamp
         t0 = time.perf_counter()     # a measurement for /diagnostics, not a policy input
         try:
-            tracks = self.fusion.step(views, stamp, stamp_ns)
+            tracks, events = self.watch.fused(self.fusion, views, stamp, stamp_ns)
         except Exception as exc:  # noqa: B902 - a core failure must not stop the node
             self.counts['fusion_errors'] += 1
             self.log.throttled('fusion_error', f'Fusion.step failed on the set at '
@@ -340,6 +361,8 @@ class LiveFusion:
                           for k, s, t in self.output.reset()[1]]
             return False
         processing = None if idle else time.perf_counter() - t0
+        for event in events:
+            self._watched(event)
         self.last_tracks = [t for t in tracks if t.state != TrackState.DELETED]
         out, smoothed = self.output.step(tracks, stamp, stamp_ns, smoothed=self.wants_smoothed())
         self._out.append(Publication(stamp_ns, stamp, out, latency=not idle,
@@ -348,6 +371,18 @@ class LiveFusion:
             self._out.append(Publication(*smoothed, smoothed=True))
         self.last_set_ns = stamp_ns
         return True
+
+    def _watched(self, event: WatchEvent) -> None:
+        """Say what the calibration watch found (its correction is in the fusion already)."""
+        self.counts[f'watch_{event.kind}'] += 1
+        if event.kind == 'error':
+            self.log.throttled('watch_error', event.message)
+        elif event.kind == 'agrees':
+            self.log.info(event.message)
+        else:
+            self.log.warning(event.message)
+        if event.kind == 'corrected':
+            self.log.rig(dict(self.watch.cameras))
 
 
 def _no_clock() -> int:

@@ -23,6 +23,11 @@ The steps, in the order ``extrinsics.calibrate`` runs them:
 - :mod:`.placement`: cameras placed one by one and adjusted; odd and bumped cameras found.
 - :mod:`.frame`: the world frame and metric scale; comparing an estimate with a reference rig.
 - :mod:`.extrinsics`: ``calibrate`` (and ``refine``), the conductor over the steps, its report.
+
+Live, on a calibrated rig:
+
+- :mod:`.watch`: each camera's pose checked against the others' people; a turned camera named,
+  left out or turned back.
 """
 
-__all__ = ['extrinsics', 'frame', 'pairs', 'placement', 'points', 'views']
+__all__ = ['extrinsics', 'frame', 'pairs', 'placement', 'points', 'views', 'watch']
