@@ -19,7 +19,7 @@ The process list (``nodes.processes``) is what bringup and the launch file both 
 launch file is run here with stand-ins for ``launch``/``launch_ros`` (not in the PyPI wheels),
 and against the real ones where they are installed.
 
-The real run uses a crafted constant-output ONNX model (see ``test_pose2d_node``), so no
+The real run uses a crafted constant-output ONNX model (``pose2d_models``), so no
 model download is needed: images in, ``persons_2d`` per camera, ``tracks`` from fusion.
 """
 
@@ -197,8 +197,8 @@ def test_bad_rig_and_cameras_fail_with_clear_messages(rig, tmp_path):
 @pytest.mark.ros
 def test_bringup_runs_pipeline_and_stops_on_sigint(rig, tmp_path, ros_context):
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    from test_pose2d_node import _crafted_model
-    model, _ = _crafted_model(tmp_path)
+    from pose2d_models import crafted_model
+    model, _ = crafted_model(tmp_path)
     log_path = tmp_path / 'bringup.log'
     proc = NodeProcess(
         [sys.executable, '-m', 'mv3dpose_ros.nodes.bringup', '--rig', rig,

@@ -15,9 +15,10 @@
 """
 The parts pose2d_node is wired from, without a node: config, mailbox, thread, rates, sizes.
 
-The node's DDS tests (``test_pose2d_node``) run them together; these pin each part's own
-behaviour: the parameter table the config declares, what the mailbox counts, the inference
-thread's loop, the rate in use with a rig, and the estimator cache on crafted ONNX files.
+The node's DDS tests (``test_pose2d_node``, ``_model``, ``_rate``) run them together; these
+pin each part's own behaviour: the parameter table the config declares, what the mailbox
+counts and when it dozes, the inference thread's loop, the rate in use with a rig, auto mode's
+steps along the size ladder, and the estimator cache on crafted ONNX files.
 """
 
 import os
@@ -30,11 +31,12 @@ from mv3dpose_ros.pose2d.config import ModelConfig, parameter_error, Pose2DConfi
 from mv3dpose_ros.pose2d.estimator import open_estimator
 from mv3dpose_ros.pose2d.intake import (header_stamp_ns, ImageMailbox, InferenceThread,
                                         skipped_before)
-from mv3dpose_ros.pose2d.scheduling import AUTO_RATES_HZ, doze_s, missed_windows
+from mv3dpose_ros.pose2d.scheduling import (AUTO_RATES_HZ, doze_s, frame_period_ns,
+                                            missed_windows, parse_inference_rate)
 from mv3dpose_ros.pose2d.sizing import EstimatorCache
 import numpy as np
+from pose2d_models import fake_cache   # crafted yolo11n-pose files in a cache
 import pytest
-from test_pose2d_node import _fake_cache   # crafted yolo11n-pose files in a cache
 
 NS = 1_000_000_000
 MS = 1_000_000
@@ -134,9 +136,71 @@ def test_mailbox_on_a_grid_skips_within_a_window_and_drops_a_lost_window():
     assert (mailbox.skipped, mailbox.dropped) == (6, 1)
     assert mailbox.grid_stamp == 1000 * NS + 400 * MS
     assert mailbox.rate_label() == 2.5
-    mailbox.pop()
-    mailbox.offer(_cdr(1000 * NS + 1600 * MS), 9, 16, None, 0.0)    # images 8-15 never taken
+    mailbox.pop()                                           # the model took it
+    # images 8-15 never taken: the windows of 8-11 and 12-15 lost (one image each that would
+    # have been inferred: dropped; the other 6 skipped), 16 opens the next one
+    mailbox.offer(_cdr(1000 * NS + 1600 * MS), 9, 16, None, 0.0)
     assert (mailbox.skipped, mailbox.dropped) == (12, 3)
+    assert mailbox.grid_stamp == 1000 * NS + 1600 * MS
+    mailbox.offer(_cdr(1000 * NS + 1700 * MS), 1, 17, None, 0.0)    # same window: skipped
+    assert (mailbox.skipped, mailbox.dropped) == (13, 3)
+
+
+def test_grid_no_faster_than_the_camera_infers_every_image():
+    """A grid at the camera's own rate selects nothing: jittered stamps never skip a frame."""
+    rate = GridRate(shared=False)
+    rate.use(parse_inference_rate(10.0))
+    mailbox = ImageMailbox(rate)
+    jitter = (4, -3, 2, -4, 3, -2, 4, -3, 1, -4) * 3          # ms, around the window boundary
+
+    def offer(k):                                               # 10 Hz camera, 10 Hz grid
+        stamp = 1000 * NS + k * 100 * MS + jitter[k % 10] * MS
+        mailbox.offer(_cdr(stamp), 1, time.time_ns(), None, time.monotonic())
+
+    for k in range(len(jitter)):
+        offer(k)
+    assert frame_period_ns(mailbox.takes) == pytest.approx(100 * MS, rel=0.1)
+    # the first image opens a window, every later one reaches the mailbox too (on the
+    # grid, the +4 / -3 ms pairs would share a window and the next one would be empty)
+    assert mailbox.skipped == 0 and mailbox.dropped == len(jitter) - 1
+    assert mailbox.doze_s() == 0.0
+    assert mailbox.rate_label() == '10: every image (camera not faster)'   # /diagnostics
+    rate.use(parse_inference_rate(5.0))                          # half: selects
+    for k in range(30, 40):
+        offer(k)
+    assert mailbox.skipped == 5 and mailbox.rate_label() == 5.0
+
+
+def test_grid_mode_dozes_until_the_next_window_is_due():
+    """Between windows the inference thread takes nothing; it wakes half a frame early."""
+    rate = GridRate(shared=False)
+    rate.use(parse_inference_rate(2.0))
+    mailbox = ImageMailbox(rate)
+
+    def history(speed):
+        now = time.time_ns()
+        window = 1000 * NS                      # a 500 ms window opened at 1000 s
+        mailbox.grid_stamp = window
+        mailbox.takes.clear()
+        for k in range(-24, 3):                 # 20 Hz camera, up to 100 ms into it
+            # the last image arrives now; stamps run at ``speed`` x the wall clock
+            mailbox.takes.append((now - int((100 - 50 * k) * MS / speed), window + k * 50 * MS,
+                                  1))
+        return now
+
+    def dozes(expected_s, now):
+        """Tell whether the doze is ``expected_s`` less the wall time since ``now``."""
+        before = (time.time_ns() - now) / 1e9
+        doze = mailbox.doze_s()
+        after = (time.time_ns() - now) / 1e9
+        return expected_s - after - 0.01 <= doze <= expected_s - before + 0.01
+    # next window at +500 ms of stamps, due 400 ms after the last one; wake 25 ms early
+    assert dozes(0.375, history(1.0))
+    assert dozes(0.1875, history(2.0))          # a replay at twice real time
+    mailbox.grid_stamp = 1000 * NS + 10 * NS    # stamps far ahead: at most one window
+    assert mailbox.doze_s() <= 0.25 + 1e-6
+    rate.use(parse_inference_rate(0.0))
+    assert mailbox.doze_s() == 0.0               # every image: never dozes
 
 
 def test_missed_windows_and_doze_are_grid_arithmetic():
@@ -237,7 +301,7 @@ def test_grid_rate_adapt_says_what_auto_mode_changed():
 
 # -- sizes ----------------------------------------------------------------------------------------
 def test_estimator_cache_fits_the_first_image_and_opens_each_size_once(tmp_path):
-    cache = _fake_cache(tmp_path, [(640, 640), (384, 640), (288, 512), (192, 320)])
+    cache = fake_cache(tmp_path, [(640, 640), (384, 640), (288, 512), (192, 320)])
     opened, ladders = [], []
 
     def open_file(path, hw):
@@ -274,7 +338,7 @@ def test_estimator_cache_fits_the_first_image_and_opens_each_size_once(tmp_path)
 
 
 def test_estimator_cache_names_the_size_that_would_fit_better(tmp_path):
-    cache = _fake_cache(tmp_path, [(640, 640)])
+    cache = fake_cache(tmp_path, [(640, 640)])
     sizes = EstimatorCache(ModelConfig(cache_dir=cache, threads=1),
                            lambda path, hw: open_estimator(path, threads=1, input_size=hw),
                            lambda: True, lambda ladder: None)
@@ -289,3 +353,68 @@ def test_estimator_cache_names_the_size_that_would_fit_better(tmp_path):
     assert fixed.load().input_size == (640, 640) and not fixed.fit_pending
     assert fixed.follow((1080, 1920), lambda: None) is None and fixed.values()[
         'Input size steps (auto)'] == 'fixed'
+
+
+def test_precision_auto_lists_int8_twins_on_the_cpu_and_fp32_on_a_gpu(tmp_path):
+    """model.precision auto (default): a size's int8 twin where fetched, on the CPU only."""
+    cache = fake_cache(tmp_path, [(384, 640), (192, 320)], int8=[(288, 512), (192, 320)])
+    on_cpu = [True]
+    sizes = EstimatorCache(ModelConfig(cache_dir=cache, threads=1),
+                           lambda path, hw: open_estimator(path, threads=1, input_size=hw),
+                           lambda: on_cpu[0], lambda ladder: None)
+    assert sizes.config.precision == 'auto'
+    assert sizes.fetched_sizes() == [(384, 640), (288, 512), (192, 320)]
+    for size, precision in (((192, 320), 'int8'), ((288, 512), 'int8'),
+                            ((384, 640), 'fp32')):
+        path = sizes.path(size)
+        assert path == models.model_file('yolo11n-pose', size, cache, precision)
+        assert open_estimator(path, threads=1).precision == precision
+    on_cpu[0] = False                                    # the model runs on a GPU
+    assert sizes.fetched_sizes() == [(384, 640), (192, 320)]     # fp32 only on a GPU
+    assert sizes.path((192, 320)) == models.model_file('yolo11n-pose', (192, 320), cache)
+
+
+def test_auto_mode_steps_the_model_down_the_ladder_and_back(tmp_path):
+    """Under load, inference_rate_hz auto moves the camera to the next fetched smaller input."""
+    sizes_hw = [(640, 640), (384, 640), (288, 512), (224, 384), (192, 320)]
+    cache = fake_cache(tmp_path, sizes_hw)      # 192x320: not a registry size, still used
+    rate = GridRate(shared=False)
+    rate.use(parse_inference_rate('auto'))      # the default
+    # wired as pose2d_node wires them: each new ladder goes to auto mode
+    sizes = EstimatorCache(ModelConfig(cache_dir=cache, threads=1, min_input_side=320),
+                           lambda path, hw: open_estimator(path, threads=1, input_size=hw),
+                           lambda: True, rate.set_sizes)
+    sizes.load()
+    sizes.set_value('score_threshold', 0.5)
+    image = np.zeros((1080, 1920, 3), np.uint8)
+
+    def frame():                                # what the node does with each image
+        sizes.follow(image.shape[:2], lambda: rate.size)
+        return sizes.estimator.infer(image, 'bgr')
+
+    assert len(frame()) == 1
+    assert tuple(sizes.estimator.input_size) == (384, 640)
+    assert sizes.ladder == [(384, 640), (288, 512), (224, 384), (192, 320)]
+    # A camera at 10 Hz, 100 ms per image and images replaced: one step down per dwell
+    # (0.6 of the pixels is estimated to fit at most 0.7 of the frame period).
+    auto, clock = rate.auto, 0.0
+    for expected in [(288, 512), (224, 384), (192, 320)]:
+        for _ in range(40):
+            clock += 0.1
+            auto.add_stamp(int(clock * NS))
+            auto.add_replaced()
+            auto.add_processing(0.1)
+            if auto.update(clock):
+                break
+        people = frame()
+        assert tuple(sizes.estimator.input_size) == expected
+        assert sizes.estimator.path == models.model_file('yolo11n-pose', expected, cache)
+        assert sizes.estimator.score_threshold == 0.5      # dynamic values carried over
+        assert len(people) == 1
+    values = sizes.values()                     # the node's /diagnostics has them
+    assert values['Input size (HxW)'] == '192x320'
+    assert values['Input size steps (auto)'] == '384x640, 288x512, 224x384, 192x320'
+    # Leaving auto mode goes back to the size fitted to the camera.
+    rate.use(parse_inference_rate(0), sizes.ladder)
+    frame()
+    assert tuple(sizes.estimator.input_size) == (384, 640)

@@ -18,15 +18,18 @@ pose2d_node's ``/diagnostics``: one status per camera with its image path figure
 ``Pose2DStatus`` keeps the counters and windows the node's image path feeds (input and output
 rates, header stamps, inference, whole-path and per-stage latency, rejects) and builds the
 status from them, from the mailbox's counts (``pose2d.intake.ImageMailbox``) and from the
-values the inference rate and the model in use report. The benches and tests read its keys.
+values the inference rate and the model in use report. The benches and tests read its keys;
+``Pose2DStats`` is the same counts as numbers, for whoever runs the node in-process.
 """
 
+from dataclasses import dataclass
 import math
 import threading
 import time
 from typing import Any, Dict, Optional, Tuple
 
 from mv3dpose_ros.core.diagnostic_keys import Pose2DKeys as K
+from mv3dpose_ros.pose2d.intake import header_stamp_ns
 from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, make_status, OK,
                                           TimestampStats, WARN, WindowStats)
 
@@ -34,6 +37,24 @@ from mv3dpose_ros.ros.diagnostics import (ERROR, FrequencyStats, level_value, ma
 #: worker start (waiting behind the previous inference), CDR parse + numpy, letterbox,
 #: onnxruntime, NMS + inversion, message build + publish.
 STAGES = ('transport', 'wait', 'decode', 'pre', 'inference', 'post', 'publish')
+
+
+@dataclass(frozen=True)
+class Pose2DStats:
+    """One camera's image counts and inference rate at one moment (``Pose2DNode.stats``)."""
+
+    received: int                #: camera images, counted from the sequence numbers
+    taken: int                   #: copied out of DDS
+    dropped: int                 #: replaced by a newer image before the model took them
+    skipped: int                 #: left out by the inference_rate_hz grid
+    processed: int               #: whose persons were published
+    failed: int                  #: inference failures
+    rejected_encoding: int       #: images of an encoding or size the model cannot take
+    rejected_stamp: int          #: images with a zero header stamp
+    skips_announced: int         #: SkippedImages sent on persons_2d/skipped
+    inference_rate_hz: float     #: the grid rate in use (0: every image; auto: its choice)
+    rate_mode: str               #: 'auto', 'fixed' or 'every image'
+    waiting_stamp_ns: Optional[int]   #: header stamp of the image waiting for the model
 
 
 class Pose2DStatus:
@@ -50,6 +71,17 @@ class Pose2DStatus:
         self.capture_ms = WindowStats()          # header stamp -> persons_2d published
         self.last_input_ns: Optional[int] = None
         self._rejects_reported = 0
+
+    def stats(self, mailbox: Any, rate: Any) -> Pose2DStats:
+        """Return the counts now, with the mailbox's and the inference rate's (``GridRate``)."""
+        with mailbox.cv:
+            counts = (mailbox.received, mailbox.taken, mailbox.dropped, mailbox.skipped)
+            waiting = mailbox.pending
+        with self.lock:
+            own = (self.processed, self.failed, self.rejected_encoding, self.rejected_stamp,
+                   self.skips_announced)
+        return Pose2DStats(*counts, *own, rate.hz, rate.mode,
+                           None if waiting is None else header_stamp_ns(waiting))
 
     def received(self, frames: int, now_ns: int) -> None:
         """Count ``frames`` camera images up to one taken at ``now_ns`` (node clock)."""

@@ -42,11 +42,11 @@ This is the ROS wiring. Parameters: ``pose2d.config``; logic: ``pose2d.intake``,
 import sys
 import threading
 import time
-from typing import Any, Callable, List, Optional, Tuple, Union
+from typing import Any, List, Optional, Tuple, Union
 
 from mv3dpose_msgs.msg import Person2DArray, SkeletonInfo, SkippedImages
 from mv3dpose_ros.core.skeleton import get_layout
-from mv3dpose_ros.nodes.pose2d.diagnostics import Pose2DStatus
+from mv3dpose_ros.nodes.pose2d.diagnostics import Pose2DStats, Pose2DStatus
 from mv3dpose_ros.nodes.pose2d.image_intake import ImageIntake
 from mv3dpose_ros.nodes.pose2d.rig_rate import RigRateLink
 from mv3dpose_ros.pose2d.auto_rate import GridRate, RIG_RATE_PERIOD_S
@@ -76,37 +76,11 @@ __all__ = ['header_stamp_ns', 'main', 'parse_inference_rate', 'Pose2DNode']
 SUCCESS, FAILURE = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
 
 
-def _alias(owner: str, name: str) -> property:
-    """Return a property reading (and writing) ``self.<owner>.<name>``."""
-    return property(lambda self: getattr(getattr(self, owner), name),
-                    lambda self, value: setattr(getattr(self, owner), name, value))
-
-
-def _forward(owner: str, name: str) -> Callable[..., Any]:
-    """Return a method calling ``self.<owner>.<name>``."""
-    return lambda self, *args: getattr(getattr(self, owner), name)(*args)
-
-
 class Pose2DNode(LifecycleNode):
     """Run a 2D multi-person pose model on one camera's images."""
 
-    # The counts and state of the node's parts, under the names the node has always had.
-    received, taken = _alias('_mailbox', 'received'), _alias('_mailbox', 'taken')
-    dropped, skipped = _alias('_mailbox', 'dropped'), _alias('_mailbox', 'skipped')
-    _pending, _grid_stamp = _alias('_mailbox', 'pending'), _alias('_mailbox', 'grid_stamp')
-    _taken, _auto = _alias('_mailbox', 'takes'), _alias('_rate', 'auto')
-    processed, failed = _alias('_status', 'processed'), _alias('_status', 'failed')
-    rejected_encoding = _alias('_status', 'rejected_encoding')
-    rejected_stamp = _alias('_status', 'rejected_stamp')
-    skips_announced = _alias('_status', 'skips_announced')
-    inference_rate_hz = property(lambda self: self._rate.hz,
-                                 doc='Grid rate in use now (0: every image; auto: its choice).')
     estimator = property(lambda self: self._sizes and self._sizes.estimator,
                          doc='The estimator in use (None unless configured).')
-    _ladder = property(lambda self: self._sizes.ladder if self._sizes else [])
-    _registered_path = _forward('_sizes', 'path')
-    _fetched_sizes = _forward('_sizes', 'fetched_sizes')
-    _doze_s, _rate_label = _forward('_mailbox', 'doze_s'), _forward('_mailbox', 'rate_label')
 
     def __init__(self, node_name: str = 'pose2d_node', **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
@@ -139,6 +113,11 @@ class Pose2DNode(LifecycleNode):
         """Tell whether the node is in the active lifecycle state."""
         return self._state_machine.current_state[1] == 'active'
 
+    @property
+    def stats(self) -> Pose2DStats:
+        """Return the camera's image counts and inference rate now, as /diagnostics has them."""
+        return self._status.stats(self._mailbox, self._rate)
+
     def _param(self, name: str) -> Any:
         return self.get_parameter(name).value
 
@@ -160,7 +139,8 @@ class Pose2DNode(LifecycleNode):
                 return SetParametersResult(successful=False, reason=reason)
         for p in params:
             if p.name == 'inference_rate_hz':
-                self._rate.use(parse_inference_rate(p.value), self._ladder)
+                self._rate.use(parse_inference_rate(p.value),
+                               self._sizes.ladder if self._sizes else [])
             elif self._sizes is not None:
                 self._sizes.set_value(p.name, p.value)
         return SetParametersResult(successful=True)
@@ -295,11 +275,16 @@ class Pose2DNode(LifecycleNode):
     # -- data path --------------------------------------------------------------------------------
     def _on_taken(self, msg: bytes, info: Any) -> None:
         """Take one image from the intake; count the camera's images never taken before it."""
-        self._on_image(msg, *self._mailbox.arrival(info))
+        self.offer(msg, *self._mailbox.arrival(info))
 
-    def _on_image(self, msg: Union[Image, bytes], frames: int = 1,
-                  arrived_ns: Optional[int] = None, seq: Optional[int] = None) -> None:
-        """Offer an image to the mailbox (``ImageMailbox.offer``); ``arrived_ns`` default now."""
+    def offer(self, msg: Union[Image, bytes], frames: int = 1, arrived_ns: Optional[int] = None,
+              seq: Optional[int] = None) -> None:
+        """
+        Offer one image to the model, as the intake does (``pose2d.intake.ImageMailbox.offer``).
+
+        ``frames``: the camera images it stands for (those never taken before it counted);
+        ``arrived_ns``: when it was received (default now); ``seq``: its sequence number.
+        """
         self._status.received(frames, self.get_clock().now().nanoseconds)
         self._mailbox.offer(msg, frames, arrived_ns or time.time_ns(), seq, time.monotonic())
 
@@ -310,7 +295,8 @@ class Pose2DNode(LifecycleNode):
                       f'{exc}')
         elif self.context.ok():             # else Ctrl-C shut the context down: no error
             if what == 'failed':
-                self.failed += 1
+                with self._status.lock:
+                    self._status.failed += 1
             text = 'inference failed' if what == 'failed' else 'taking an image failed'
             self._complain(what, f'{text}: {exc!r}')
 
@@ -332,7 +318,8 @@ class Pose2DNode(LifecycleNode):
         stamp = stamp_to_ns(msg.header.stamp)
         self._status.stamp(stamp, self.get_clock().now().nanoseconds)
         if stamp == 0:
-            self.rejected_stamp += 1
+            with self._status.lock:
+                self._status.rejected_stamp += 1
             self._complain('stamp', f'image with a zero header stamp on '
                            f'{self.resolve_topic_name("image")} rejected: the driver must stamp '
                            'images with their capture time (fusion synchronises on it)')
@@ -341,7 +328,8 @@ class Pose2DNode(LifecycleNode):
         try:
             image, order = message_to_numpy(msg, data)
         except ImageError as exc:
-            self.rejected_encoding += 1
+            with self._status.lock:
+                self._status.rejected_encoding += 1
             self._complain('image', f'image on {self.resolve_topic_name("image")} rejected: '
                            f'{exc}')
             return None
