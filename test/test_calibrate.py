@@ -263,3 +263,31 @@ def test_pose2sim_keeps_the_frame_of_the_given_calibration(tmp_path, capsys):
     est, ref = load_calibration(out), load_calibration(CALIB)
     for name, (deg, metres) in camera_errors(est, ref).items():
         assert deg < 1.5 and metres < 0.12, (name, deg, metres)
+
+
+@needs_shelf
+def test_a_calibration_without_image_size_is_read_with_image_size_option(tmp_path, capsys):
+    """VoxelPose files give no image size: ``--image-size WxH`` gives it, its absence says so."""
+    from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
+
+    rig = tmp_path / 'cams.json'                 # not named like a known data set
+    shutil.copy(SHELF, rig)
+    cams, _, views = shelf_proxy(40, people=2)
+    for cam in cams:
+        os.makedirs(tmp_path / 'pose' / cam)
+        for k, frame in enumerate(views):
+            write_openpose_file(str(tmp_path / 'pose' / cam / openpose_filename(cam, k)),
+                                frame[cam])
+    track = ['track', '--calibration', str(rig), '--poses', str(tmp_path / 'pose'),
+             '--layout', 'coco17', '-o', str(tmp_path / 't.jsonl'), '--no-progress']
+    assert cli.main(track) == 2
+    assert '--image-size WxH' in capsys.readouterr().err
+    assert cli.main(track + ['--image-size', '1032x776']) == 0
+    capsys.readouterr()
+    code, _, err = _run(capsys, '--calibration', str(rig), '--poses', str(tmp_path / 'pose'),
+                        '--layout', 'coco17', '-o', str(tmp_path / 'r.yaml'))
+    assert code == 2 and '--image-size WxH' in err
+    code, _, err = _run(capsys, '--calibration', str(rig), '--image-size', '1032x776',
+                        '--poses', str(tmp_path / 'pose'), '--layout', 'coco17',
+                        '-o', str(tmp_path / 'r.yaml'))
+    assert 'image size' not in err

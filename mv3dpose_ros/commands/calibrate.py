@@ -37,6 +37,8 @@ import os
 import sys
 from typing import Dict, List, Optional, Tuple
 
+from mv3dpose_ros.io.pose_inputs import add_image_size_argument
+
 PERSONS_TYPE = 'mv3dpose_msgs/msg/Person2DArray'
 INFO_TYPE = 'sensor_msgs/msg/CameraInfo'
 
@@ -49,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'holding CameraInfo')
     parser.add_argument('--calibration-format', default='auto',
                         help='calibration format (default: auto-detect)')
+    add_image_size_argument(parser)
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument('--poses', metavar='ROOT',
                      help='folder with one OpenPose JSON folder per camera')
@@ -139,12 +142,11 @@ def _intrinsics(args, bag_infos: Dict[str, dict], names: List[str]) -> dict:
     """Return camera -> Camera (intrinsics) from --calibration, else the bag's CameraInfo."""
     import numpy as np
 
-    from mv3dpose_ros.core.geometry.calibration import load_calibration
     from mv3dpose_ros.core.geometry.camera import Camera
     from mv3dpose_ros.core.selfcal.views import SelfCalError
+    from mv3dpose_ros.io.pose_inputs import load_rig
 
-    given = load_calibration(args.calibration, args.calibration_format) \
-        if args.calibration else {}
+    given = load_rig(args) if args.calibration else {}
     out = {}
     for n in names:
         if n in given:
@@ -172,10 +174,9 @@ def _unmatched_folders(root: str, cameras) -> List[str]:
 
 def load_inputs(args):
     """Return ``(views, intrinsics, layout, given rig)`` or raise a typed error."""
-    from mv3dpose_ros.core.geometry.calibration import load_calibration
     from mv3dpose_ros.core.selfcal.views import normalise_views, SelfCalError, Settings
     from mv3dpose_ros.core.skeleton import get_layout
-    from mv3dpose_ros.io.pose_inputs import open_inputs
+    from mv3dpose_ros.io.pose_inputs import load_rig, open_inputs
 
     settings = Settings(min_confidence=args.min_confidence)
     if args.poses:
@@ -210,7 +211,7 @@ def load_inputs(args):
     if args.refine:
         if not args.calibration:
             raise SelfCalError('--refine needs --calibration with the rig to start from')
-        given = load_calibration(args.calibration, args.calibration_format)
+        given = load_rig(args)
         given = {n: given[n] for n in cameras}
     del num
     return views, cameras, layout, given, settings

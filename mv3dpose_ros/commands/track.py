@@ -53,7 +53,7 @@ import sys
 import time
 from typing import Iterator, Tuple
 
-from mv3dpose_ros.io.pose_inputs import open_inputs
+from mv3dpose_ros.io.pose_inputs import add_image_size_argument, open_inputs
 
 LOG = logging.getLogger('mv3dpose.track')
 SMOOTH_MODES = ('causal', 'fixed-lag', 'offline', 'none')
@@ -66,6 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'Pose2Sim TOML)')
     parser.add_argument('--calibration-format', default='auto',
                         help='calibration format (default: auto-detect)')
+    add_image_size_argument(parser)
     parser.add_argument('--poses', required=True, metavar='ROOT',
                         help='folder with one OpenPose JSON folder per camera')
     parser.add_argument('--layout', required=True,

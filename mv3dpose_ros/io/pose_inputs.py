@@ -16,21 +16,49 @@
 The inputs of the commands that read per-camera OpenPose JSON folders with a calibration.
 
 ``mv3dpose track`` and ``mv3dpose calibrate`` take the same ``--calibration``,
-``--calibration-format``, ``--cameras``, ``--poses`` and ``--layout``; this is their one
-reading of them.
+``--calibration-format``, ``--image-size``, ``--cameras``, ``--poses`` and ``--layout``; this
+is their one reading of them.
 """
 
-from typing import List, Tuple
+import argparse
+from typing import List, Optional, Tuple
+
+
+def image_size(text: str) -> Tuple[int, int]:
+    """Parse ``WxH`` (e.g. ``1032x776``) into ``(w, h)``: an argparse type."""
+    try:
+        w, h = (int(v) for v in text.lower().split('x'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected WIDTHxHEIGHT in pixels, e.g. 1920x1080, '
+                                         f'got {text!r}') from None
+    if w <= 0 or h <= 0:
+        raise argparse.ArgumentTypeError(f'image size must be positive, got {text!r}')
+    return w, h
+
+
+def add_image_size_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--image-size WxH``: the size of calibrations that do not give one (VoxelPose)."""
+    parser.add_argument('--image-size', type=image_size, metavar='WxH',
+                        help="every camera's image size in pixels, for calibration files "
+                             'that do not give it (VoxelPose JSON other than Shelf and '
+                             'Campus, whose sizes are known by file name)')
+
+
+def load_rig(args, cameras: Optional[List[str]] = None) -> dict:
+    """Load ``args.calibration`` as these commands do (format, image size, camera subset)."""
+    from mv3dpose_ros.core.geometry.calibration import load_calibration
+
+    return load_calibration(args.calibration, args.calibration_format, cameras=cameras,
+                            image_size=getattr(args, 'image_size', None))
 
 
 def open_inputs(args) -> Tuple[dict, object, List[str]]:
     """Load the calibration and index the pose folders; return (cameras, sequence, notes)."""
-    from mv3dpose_ros.core.geometry.calibration import load_calibration
     from mv3dpose_ros.core.skeleton import get_layout
     from mv3dpose_ros.io.openpose import match_camera_folders, OpenPoseSequence
 
     layout = get_layout(args.layout)
-    cameras = load_calibration(args.calibration, args.calibration_format, cameras=args.cameras)
+    cameras = load_rig(args, args.cameras)
     folders, missing = match_camera_folders(args.poses, list(cameras))
     notes = list(missing)
     if args.cameras and missing:

@@ -377,7 +377,8 @@ def _load_voxelpose(path: str, data: Any, image_size: Optional[Tuple[int, int]]
         p = _numbers(entry.get('p', [0, 0]), 2, 'p', name, path)
         if image_size is not None or 'width' not in entry:
             if default_size is None:
-                raise CalibrationError('no image size in the file: pass image_size=(w, h)',
+                raise CalibrationError('no image size in the file: give one (--image-size WxH '
+                                       'on the command line, image_size=(w, h) in Python)',
                                        source=path, camera=name, field='width')
             width, height = default_size
         else:
