@@ -267,7 +267,7 @@ def test_pose2sim_keeps_the_frame_of_the_given_calibration(tmp_path, capsys):
 
 @needs_shelf
 def test_a_calibration_without_image_size_is_read_with_image_size_option(tmp_path, capsys):
-    """VoxelPose files give no image size: ``--image-size WxH`` gives it, its absence says so."""
+    """Read a VoxelPose file (no image size) with ``--image-size WxH``; without, say so."""
     from mv3dpose_ros.io.openpose import openpose_filename, write_openpose_file
 
     rig = tmp_path / 'cams.json'                 # not named like a known data set
