@@ -370,13 +370,13 @@ def limits(cams: int = 4, persons: int = 2000, rate: float = 30.0) -> None:
             times = []
             for _ in range(20):
                 t0 = time.perf_counter()
-                node._on_persons(cam, big)
+                node.on_persons(cam, big)
                 times.append(time.perf_counter() - t0)
             print(f'{n} persons ({len(big)} bytes) on {cam}: dropped in median '
                   f'{np.median(times) * 1e3:.2f} ms, max {max(times) * 1e3:.2f} ms over '
                   f'{len(times)} messages; rejected {dict(node.cams[cam].rejected)}',
                   flush=True)
-        limit = node.max_persons
+        limit = node.params.limits.max_persons
         views = {cm: crowd(limit) for cm in scene.cameras}
         steps = []
         for k in range(5):

@@ -69,7 +69,7 @@ class Feeder:
 
     def __init__(self, feed: Pose2Sim):
         self.feed = feed
-        self.frames = self._frames_only(feed)
+        self.frames = self.frames_of(feed)
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
         self.node = rclpy.create_node('foxglove_feeder', context=self.ctx)
@@ -81,11 +81,11 @@ class Feeder:
         self.diagnostics = []
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append,
                                       reliable_qos(50))
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self.run, daemon=True)
 
     @staticmethod
-    def _frames_only(feed: Pose2Sim):
+    def frames_of(feed: Pose2Sim):
         """Return [(stamp_ns, {cam: Person2DArray}, TrackedSkeletonArray)] of Fusion.step."""
         fusion = Fusion(feed.cameras, LAYOUT)
         frames = []
@@ -103,11 +103,11 @@ class Feeder:
             all(p.get_subscription_count() for p in self.pubs.values())
 
     def start(self):
-        self._thread.start()
+        self.thread.start()
 
-    def _run(self):
+    def run(self):
         i = 0
-        while not self._stop.is_set():
+        while not self.stopping.is_set():
             _, msgs, tracks = self.frames[i % len(self.frames)]
             for cam, m in msgs.items():
                 self.pubs[cam].publish(m)
@@ -119,9 +119,9 @@ class Feeder:
             time.sleep(1 / 30)
 
     def close(self):
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(5)
+        self.stopping.set()
+        if self.thread.is_alive():
+            self.thread.join(5)
         self.node.destroy_node()
         rclpy.shutdown(context=self.ctx)
 
@@ -424,7 +424,7 @@ def test_scene_update_deletes_ended_tracks_and_fades_coasting_ones(shared_data):
     from mv3dpose_ros.ros.messages import msg_to_tracks
     from mv3dpose_ros.viz.scene import skeleton_update
     feed = Pose2Sim(shared_data, frames=10)
-    *_, last = Feeder._frames_only(feed)[-1]
+    *_, last = Feeder.frames_of(feed)[-1]
     tracks = [t for t in msg_to_tracks(last) if t.state == TrackState.CONFIRMED]
     assert len(tracks) == 2
     tracks[0].state, tracks[1].state = TrackState.DELETED, TrackState.COASTING

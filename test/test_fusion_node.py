@@ -136,8 +136,8 @@ class Harness:
 
     def wait_sets(self, count, timeout=10.0):
         """Wait until the node emitted ``count`` sets and the probe received them all."""
-        return self.spin_until(lambda: self.node.counts['sets'] >= count and
-                               len(self.tracks) >= self.node.counts['sets'], timeout)
+        return self.spin_until(lambda: self.node.live.counts['sets'] >= count and
+                               len(self.tracks) >= self.node.live.counts['sets'], timeout)
 
     def latest_status(self, suffix):
         for arr in reversed(self.diags):
@@ -205,8 +205,9 @@ def test_tracks_match_simulation_with_jitter_reordering_and_drops(harness_factor
         events[i:i + 6] = [own[e[0]].pop(0) for e in window]
     for cam, msg, _ in events:
         h.publish(cam, msg)
-    assert h.spin_until(lambda: h.node.sync.pending() == 0 and h.node.counts['sets'] >= 80 and
-                        len(h.tracks) >= h.node.counts['sets'], timeout=15.0)
+    live = h.node.live
+    assert h.spin_until(lambda: live.sync.pending() == 0 and live.counts['sets'] >= 80 and
+                        len(h.tracks) >= live.counts['sets'], timeout=15.0)
     assert h.infos and h.infos[0].layout == 'coco17' and len(h.infos[0].joint_names) == 17
     frames = published_frames(h.tracks)
     gt_frames, pm = [], []
@@ -222,15 +223,15 @@ def test_tracks_match_simulation_with_jitter_reordering_and_drops(harness_factor
         pm.append((hyp, scene.gt[f]))
     mot = evaluate_mot(gt_frames)
     err = mpjpe(pm)
-    print(mot.summary(), f'MPJPE {err.mpjpe_m * 1e3:.1f} mm', f'sets {h.node.counts["sets"]}',
-          f'partial {h.node.counts["partial_sets"]}')
+    print(mot.summary(), f'MPJPE {err.mpjpe_m * 1e3:.1f} mm', f'sets {h.node.live.counts["sets"]}',
+          f'partial {h.node.live.counts["partial_sets"]}')
     # Offline Fusion.step on the clean scene: MOTA 0.978 (the 6 misses are the 2 frames before
     # confirmation x 3 people), MPJPE 19-24 mm. Dropped messages give partial sets (fewer views,
     # slightly larger errors) and whole frames lost when < 2 cameras remain.
     assert mot.mota >= 0.90
     assert mot.id_switches <= 1
     assert err.mpjpe_m <= 0.040
-    assert h.node.counts['partial_sets'] > 0
+    assert h.node.live.counts['partial_sets'] > 0
     # Markers (published because subscribed): DELETEALL first, confirmed tracks drawn.
     assert h.spin_until(lambda: len(h.markers) >= 10, 5.0)
     last = h.markers[-1].markers
@@ -238,7 +239,7 @@ def test_tracks_match_simulation_with_jitter_reordering_and_drops(harness_factor
     bones = [m for m in last if m.ns.endswith('bones') and m.action == Marker.ADD]
     assert len(bones) == len(frames[max(frames)]) and all(m.header.frame_id == 'world'
                                                           for m in last)
-    assert h.node.sync.stats['cam_01'].received > 0
+    assert h.node.live.sync.stats['cam_01'].received > 0
     assert sum(st.rejected['late'] for st in h.node.cams.values()) <= 2
 
 
@@ -255,8 +256,8 @@ def test_silent_camera_gives_partial_sets_and_warning(harness_factory, scene):
     status = h.latest_status(f'{silent} input')
     assert status.level == b'\x01' and 'no input on /cam_02/persons_2d' in status.message
     assert status.hardware_id == silent
-    assert h.node.sync.stats[silent].missing >= 39
-    assert h.node.counts['partial_sets'] >= 39
+    assert h.node.live.sync.stats[silent].missing >= 39
+    assert h.node.live.counts['partial_sets'] >= 39
     # the sets of the input (idle steps after it withhold coasting tracks: publish_coast_s)
     last = {k: v for k, v in published_frames(h.tracks).items()
             if k <= t0 + int(round(59 * NS / FPS))}
@@ -279,9 +280,10 @@ def test_backward_time_jump_resets_without_crash(harness_factory, scene):
     # The "bag" loops: frames 0.. again, 2 s earlier than what was already seen.
     for cam, msg, _ in stream(scene, t0, range(30)):
         h.publish(cam, msg)
-    assert h.spin_until(lambda: h.node.counts['resets'] >= 1 and h.node.counts['sets'] >= 59
-                        and len(h.tracks) >= h.node.counts['sets'] + 1)   # + tombstones
-    assert h.node.counts['resets'] == 1
+    counts = h.node.live.counts
+    assert h.spin_until(lambda: counts['resets'] >= 1 and counts['sets'] >= 59
+                        and len(h.tracks) >= counts['sets'] + 1)   # + tombstones
+    assert h.node.live.counts['resets'] == 1
     after = h.tracks[n_before:]
     tombstones = [t for m in after for t in m.skeletons if t.state == TrackState.DELETED]
     confirmed_before = {t.track_id for m in h.tracks[:n_before] for t in m.skeletons
@@ -336,7 +338,7 @@ def test_bad_inputs_dropped_counted_and_tracking_continues(harness_factory, scen
     assert h.wait_sets(20)                      # 20 complete frames: 20 sets
     state = h.node.fusion.tracker
     cam = 'cam_03'
-    last_ns = h.node.sync.last_emitted_ns
+    last_ns = h.node.live.sync.last_emitted_ns
     bad = _bad_messages(scene, cam, t0 + 20 * NS // 30, last_ns)
     n_tracks = len(h.tracks)
     for kind, msg in bad.items():
@@ -348,10 +350,10 @@ def test_bad_inputs_dropped_counted_and_tracking_continues(harness_factory, scen
         dict(h.node.cams[cam].rejected)
     # stamped 5 ms before the last set (the same instant for a free-running rig): another
     # view of it, used at its own stamp, counted 'late, used', not a rejection
-    assert h.node.sync.stats[cam].late == 1 and h.node.cams[cam].late_used == 1
+    assert h.node.live.sync.stats[cam].late == 1 and h.node.cams[cam].late_used == 1
     assert h.node.fusion.counts['late_views_used'] == 1
     assert len(h.tracks) == n_tracks           # nothing bad reached the tracker
-    assert h.node.fusion.tracker is state and h.node.counts['resets'] == 0
+    assert h.node.fusion.tracker is state and h.node.live.counts['resets'] == 0
     for cam_, msg, _ in stream(scene, t0, range(20, 40)):
         h.publish(cam_, msg)
     assert h.wait_sets(39)
@@ -393,7 +395,7 @@ def test_raw_input_malformed_dropped_and_lenient_bytes_read_by_rclpy(harness_fac
     assert dict(st.rejected) == {'malformed': 1, 'keypoint_count': 1}
     # one decoder path: no rclpy fallback printing a stderr line per malformed message
     assert 'exceeds remaining buffer' not in capfd.readouterr().err
-    assert h.node.counts['partial_sets'] == 0   # the set used cam_02's message
+    assert h.node.live.counts['partial_sets'] == 0   # the set used cam_02's message
 
 
 def test_fusion_node_process_matches_fusion_step(scene, rig_path, tmp_path):
@@ -477,7 +479,7 @@ def test_use_sim_time_stamps_latency_and_clock_jump(harness_factory, scene):
     assert h.node.get_clock().now().nanoseconds // NS == 1000
     # Latency = sim now - capture stamp: a few frames of sim time at most (the probe publishes
     # /clock ahead of the messages the node has not taken yet), not decades of wall time.
-    assert 0.0 <= h.node.latency.percentile(50) < 0.1
+    assert 0.0 <= h.node.status.latency.percentile(50) < 0.1
     assert all(st.rejected == {} for st in h.node.cams.values())
     h.diags.clear()
 
@@ -490,10 +492,10 @@ def test_use_sim_time_stamps_latency_and_clock_jump(harness_factory, scene):
         if h.spin_until(late_diag, 0.1):
             break
     assert late_diag() and stamp_to_ns(late_diag()[0].header.stamp) // NS == 1001
-    assert h.node.counts['resets'] == 0
+    assert h.node.live.counts['resets'] == 0
     clock_pub.publish(Clock(clock=ns_to_stamp(t0 - 10 * NS)))     # bag loop: /clock goes back
-    assert h.spin_until(lambda: h.node.counts['resets'] == 1, 5.0)
-    assert h.node.sync.last_emitted_ns is None
+    assert h.spin_until(lambda: h.node.live.counts['resets'] == 1, 5.0)
+    assert h.node.live.sync.last_emitted_ns is None
     for cam, msg, _ in stream(scene, t0 - 10 * NS, range(10)):
         h.publish(cam, msg)
     assert h.wait_sets(29)
@@ -565,9 +567,9 @@ def test_single_mis_stamped_message_no_reset_no_id_change(harness_factory, scene
     h.publish('cam_02', glitch)
     for cam, msg, _ in stream(scene, t0, range(30, 60)):
         h.publish(cam, msg)
-    assert h.wait_sets(59), dict(h.node.counts)
-    assert h.node.counts['resets'] == 0
-    assert h.node.sync.stats['cam_02'].outliers == 1
+    assert h.wait_sets(59), dict(h.node.live.counts)
+    assert h.node.live.counts['resets'] == 0
+    assert h.node.live.sync.stats['cam_02'].outliers == 1
     after = {t.track_id for m in h.tracks[30:] for t in m.skeletons}
     assert after == before
 
@@ -583,7 +585,7 @@ def test_persons_over_the_limit_dropped_whole_and_counted(harness_factory, scene
         h.publish(cam, msg)
     assert h.wait_sets(10)
     assert dict(h.node.cams['cam_01'].rejected) == {'too_many_persons': 1}
-    assert h.node.counts['partial_sets'] == 1
+    assert h.node.live.counts['partial_sets'] == 1
 
 
 def test_set_short_of_a_camera_released_when_its_wait_runs_out_without_new_input(
@@ -594,16 +596,17 @@ def test_set_short_of_a_camera_released_when_its_wait_runs_out_without_new_input
     for cam, msg, _ in stream(scene, t0, range(10)):
         h.publish(cam, msg)
     assert h.wait_sets(10)
-    assert h.node.sync.pending() == 0 and h.node._release_timer.is_canceled()  # asleep
+    assert h.node.live.sync.pending() == 0 and not h.node.release_armed  # asleep
     for cam, msg, _ in stream(scene, t0, [10], skip=lambda c, f: c == 'cam_04'):
         h.publish(cam, msg)
     # Nothing else arrives: only the timer armed for the end of the wait can let it go.
-    assert h.wait_sets(11, timeout=5.0), f'pending {h.node.sync.pending()}'
+    assert h.wait_sets(11, timeout=5.0), f'pending {h.node.live.sync.pending()}'
     last = h.tracks[-1]
     assert stamp_to_ns(last.header.stamp) == t0 + int(round(10 * NS / FPS))
-    assert h.node.counts['partial_sets'] == 1 and h.node.sync.stats['cam_04'].missing == 1
+    assert h.node.live.counts['partial_sets'] == 1
+    assert h.node.live.sync.stats['cam_04'].missing == 1
     assert sum(t.state == TrackState.CONFIRMED for t in last.skeletons) == scene.num_people
-    assert h.node.sync.pending() == 0 and h.node._release_timer.is_canceled()
+    assert h.node.live.sync.pending() == 0 and not h.node.release_armed
 
 
 def test_set_short_of_a_camera_goes_at_once_when_the_camera_announces_the_skip(
@@ -621,29 +624,30 @@ def test_set_short_of_a_camera_goes_at_once_when_the_camera_announces_the_skip(
     for cam, msg, _ in stream(scene, t0, [20], skip=lambda c, f: c == 'cam_04'):
         h.publish(cam, msg)
     h.spin_for(0.3)
-    assert h.node.counts['sets'] == 20        # waiting up to 5 s for cam_04's frame 20
+    assert h.node.live.counts['sets'] == 20        # waiting up to 5 s for cam_04's frame 20
     # cam_04 replaced frame 20 with frame 21 before inference and says so (its frame 19 was
     # the last it published). A malformed notice first: dropped, counted, nothing decided.
     notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[19])),
                                 camera_id='cam_04', after=ns_to_stamp(stamp[21])))
     h.spin_for(0.2)
-    assert h.node.counts['sets'] == 20 and h.node.cams['cam_04'].skips_rejected == 1
+    assert h.node.live.counts['sets'] == 20 and h.node.cams['cam_04'].skips_rejected == 1
     t_note = time.monotonic()
     notes.publish(SkippedImages(header=Header(stamp=ns_to_stamp(stamp[21])),
                                 camera_id='cam_04', after=ns_to_stamp(stamp[19])))
     assert h.wait_sets(21, timeout=2.5), 'the set still waited for the skipped image'
     assert time.monotonic() - t_note < 2.5
     assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[20]
-    assert h.node.sync.stats['cam_04'].missing == 1 and h.node.cams['cam_04'].skips == 1
-    assert h.node.sync.counts.decisions['skipped (announced)'] == 1
+    assert h.node.live.sync.stats['cam_04'].missing == 1 and h.node.cams['cam_04'].skips == 1
+    assert h.node.live.sync.counts.decisions['skipped (announced)'] == 1
     # Frame 21 then completes its set as usual; a skip never covers its own end stamps.
     for cam, msg, _ in stream(scene, t0, [21]):
         h.publish(cam, msg)
     assert h.wait_sets(22)
     assert stamp_to_ns(h.tracks[-1].header.stamp) == stamp[21]
-    assert h.node.counts['partial_sets'] == 1
+    assert h.node.live.counts['partial_sets'] == 1
     # Frame 20 is counted as skipped by the camera, not as lost upstream.
-    assert (h.node.sync.stats['cam_04'].skipped, h.node.sync.stats['cam_04'].lost) == (1, 0)
+    cam_04 = h.node.live.sync.stats['cam_04']
+    assert (cam_04.skipped, cam_04.lost) == (1, 0)
 
 
 def test_tracks_deleted_when_every_input_stops(harness_factory, scene):
@@ -661,7 +665,7 @@ def test_tracks_deleted_when_every_input_stops(harness_factory, scene):
                                     for m in h.tracks[n:] for t in m.skeletons), 2.0)
     later = [t for m in h.tracks[n:] for t in m.skeletons]
     assert {t.track_id for t in later if t.state == TrackState.DELETED} == confirmed
-    assert h.node.counts['idle_steps'] >= 1
+    assert h.node.live.counts['idle_steps'] >= 1
     stamps = [stamp_to_ns(m.header.stamp) for m in h.tracks]
     assert stamps == sorted(stamps)
 
@@ -696,9 +700,9 @@ def test_camera_below_its_usual_rate_warned_and_gaps_counted(harness_factory, sc
     for cam, msg, _ in stream(scene, t0, range(70),
                               skip=lambda c, f: c == slow and f >= 20 and f % 2):
         h.publish(cam, msg)
-    assert h.wait_sets(70), dict(h.node.counts)       # the slow camera holds no set back
+    assert h.wait_sets(70), dict(h.node.live.counts)       # the slow camera holds no set back
     # 25 frames skipped; the last (69) is not followed by a stamp, so 24 gaps are visible.
-    assert h.node.sync.stats[slow].used == 45 and h.node.sync.stats[slow].lost == 24
+    assert h.node.live.sync.stats[slow].used == 45 and h.node.live.sync.stats[slow].lost == 24
     h.diags.clear()
 
     def warned():

@@ -89,9 +89,9 @@ def test_cropped_and_resized_inputs_are_used_not_dropped(harness, portrait):
     for cam, st in h.node.cams.items():
         assert dict(st.rejected) == {} and st.accepted == FRAMES, cam
         assert st.size_problem == ''
-    assert h.node.counts['partial_sets'] == 0
+    assert h.node.live.counts['partial_sets'] == 0
     # one warning per camera and size, not per message
-    assert h.node._image_size_logged == {('cam_01', (1080, 1920), (1088, 1920)),
+    assert h.node.inputs.size_logged == {('cam_01', (1080, 1920), (1088, 1920)),
                                          ('cam_02', (1080, 1920), (1088, 1920)),
                                          ('cam_03', (544, 960), (1088, 1920))}
     # Used exactly as the calibrated-size keypoints would be: the tracks are Fusion.step's on
@@ -153,6 +153,6 @@ def test_camera_info_size_is_what_inputs_are_checked_against(portrait):
         assert h.wait_sets(3)
         assert all(st.rejected == {} for st in h.node.cams.values())
         # cam_01's images have its CameraInfo's size: nothing to map; cam_02's are a crop of it
-        assert h.node._image_size_logged == {('cam_02', (1080, 1920), (1088, 1920))}
+        assert h.node.inputs.size_logged == {('cam_02', (1080, 1920), (1088, 1920))}
     finally:
         h.close()

@@ -92,7 +92,7 @@ def test_reexec_keeps_pid_and_arguments_and_happens_once(tmp_path):
         print('main', flush=True)
     """))
     env = dict(os.environ)
-    for var in ('GLIBC_TUNABLES', OPT_OUT, memory._REEXECUTED):
+    for var in ('GLIBC_TUNABLES', OPT_OUT, memory.REEXECUTED):
         env.pop(var, None)
     out = subprocess.run([sys.executable, str(script), '--ros-args', '-p', 'x:=1'], env=env,
                          capture_output=True, text=True, timeout=60, check=True)

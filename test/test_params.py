@@ -53,7 +53,8 @@ def node_from(args):
         try:
             return {'rig': node.rig_path, 'max_wait': node.sync_config.max_wait_s,
                     'slop': node.sync_config.slop_s, 'frame': node.world_frame,
-                    'persons': node.max_persons, 'coast': node.fusion_config.max_coast_s,
+                    'persons': node.params.limits.max_persons,
+                    'coast': node.fusion_config.max_coast_s,
                     'warnings': list(node.config_warnings)}
         finally:
             node.destroy_node()

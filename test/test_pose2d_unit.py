@@ -386,9 +386,9 @@ def test_provider_options_shown_are_those_set_here_and_the_device():
                 'device_id': '1', 'cudnn_conv_algo_search': 'HEURISTIC', 'use_tf32': '1',
                 'gpu_mem_limit': '18446744073709551615', 'arena_extend_strategy': 'x'}}
 
-    assert est_mod._options_in_use(Session(), 'CUDAExecutionProvider', '/m/a.onnx') == {
+    assert est_mod.options_in_use(Session(), 'CUDAExecutionProvider', '/m/a.onnx') == {
         'device_id': '1', 'cudnn_conv_algo_search': 'HEURISTIC'}
-    assert est_mod._options_in_use(Session(), 'CPUExecutionProvider', '/m/a.onnx') == {}
+    assert est_mod.options_in_use(Session(), 'CPUExecutionProvider', '/m/a.onnx') == {}
 
 
 def test_cuda_requested_on_a_cpu_only_machine_falls_back_to_cpu(yolo_case):
@@ -406,7 +406,7 @@ def test_cuda_requested_on_a_cpu_only_machine_falls_back_to_cpu(yolo_case):
     assert len(est.infer(np.zeros((H, W, 3), np.uint8))) == 2       # and it runs
     # Handed to onnxruntime anyway (as a misconfigured GPU build would be), the session
     # still comes up on the CPU and says so.
-    session, used, warnings = est_mod._session(
+    session, used, warnings = est_mod.create_session(
         path, ort.SessionOptions(), ['CUDAExecutionProvider', 'CPUExecutionProvider'])
     assert used == 'CPUExecutionProvider' and session.get_providers() == [used]
     assert 'CUDAExecutionProvider failed to initialise' in warnings[0]
@@ -694,8 +694,9 @@ def test_int8_calibration_frames_come_from_a_folder_a_video_or_a_bag(tmp_path):
         list(fetch_mod.calibration_frames(str(tmp_path / 'notes.txt')))
 
 
-def test_a_video_is_indexed_like_a_folder(tmp_path):
+def test_a_video_is_indexed_like_a_folder(tmp_path, monkeypatch):
     """Looping publishers of a recorded rig show frame k of every camera at the same instant."""
+    from mv3dpose_ros.io import media
     from mv3dpose_ros.io.media import FrameSource, VIDEO_SEEK_FRAMES
     video = str(tmp_path / 'clip.avi')
     n = VIDEO_SEEK_FRAMES + 20
@@ -718,5 +719,12 @@ def test_a_video_is_indexed_like_a_folder(tmp_path):
     assert not src.skip() and src.read_next() is None        # the end
     src.rewind()
     assert shown(src.read_next()) == 0
-    src._video_frames = n + 5                    # a container that counts too many frames
+    opened = media.VideoReader.__init__
+
+    def counts_too_many(reader, path):           # a container that counts too many frames
+        opened(reader, path)
+        reader.frame_count += 5
+
+    monkeypatch.setattr(media.VideoReader, '__init__', counts_too_many)
+    src = FrameSource(video)
     assert shown(src.frame_at(n + 2)) == 0 and src.length == n + 2

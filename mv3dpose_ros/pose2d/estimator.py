@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import io
 import os
 import time
-from typing import Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import cv2
 from mv3dpose_ros.pose2d.models import ModelIntegrityError, read_sidecar, verify_model
@@ -147,7 +147,7 @@ def preload_cuda() -> List[str]:
     return list(_cuda_preloaded)
 
 
-def _options_in_use(session, provider: str, model_path: str) -> Dict[str, str]:
+def options_in_use(session: Any, provider: str, model_path: str) -> Dict[str, str]:
     """
     Return the session's values of the provider options this package sets, and the device.
 
@@ -425,7 +425,7 @@ def detect_family(session, metadata: Dict[str, str]) -> Tuple[Optional[str], str
     return None, f'input {ins[0].type} {shape_in} matches no supported family'
 
 
-def _session(path: str, opts, providers: List[str]):
+def create_session(path: str, opts: Any, providers: List[str]) -> Tuple[Any, str, List[str]]:
     """
     Create the session on ``providers``; return it, the provider used and warnings.
 
@@ -496,7 +496,7 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
     if not spin:
         opts.add_session_config_entry('session.intra_op.allow_spinning', '0')
     opts.log_severity_level = 3
-    session, chosen, more = _session(path, opts, wanted)
+    session, chosen, more = create_session(path, opts, wanted)
     warnings += more
     metadata = dict(session.get_modelmeta().custom_metadata_map)
     sidecar = read_sidecar(path) or {}
@@ -529,5 +529,5 @@ def open_estimator(path: str, family: str = 'auto', threads: int = 0,
                             nms_iou=float(nms_iou), max_people=int(max_people),
                             metadata=metadata, licence=licence, family=found,
                             provider=chosen,
-                            provider_options=_options_in_use(session, chosen, path),
+                            provider_options=options_in_use(session, chosen, path),
                             warnings=warnings, precision=sidecar.get('precision', 'fp32'))

@@ -125,7 +125,6 @@ class FusionNode(Node):
             LiveLog(info=log.info, warning=log.warning, throttled=self._rlog),
             wants_smoothed=lambda: self.smoothed_pub is not None and
             self.smoothed_pub.get_subscription_count() > 0)
-        self.sync, self.counts = self.live.sync, self.live.counts   # (read by tests, benches)
         self.cams: Dict[str, CameraInputStats] = {}
 
         p = self.params
@@ -136,7 +135,7 @@ class FusionNode(Node):
             state = self.cams[cam] = CameraInputStats(cam, self.resolve_topic_name(topic))
             # raw=True: CDR bytes decoded by decode_person2d_array (no object per keypoint).
             self._subs.append(self.create_subscription(
-                Person2DArray, topic, lambda msg, c=cam: self._on_persons(c, msg), in_qos,
+                Person2DArray, topic, lambda msg, c=cam: self.on_persons(c, msg), in_qos,
                 event_callbacks=subscription_events(self, topic, in_qos), raw=True))
             # pose2d_node announces the images it will send no persons for: sets stop
             # waiting for them (SkippedImages.msg).
@@ -161,7 +160,6 @@ class FusionNode(Node):
         self.diagnostics = Diagnostics(self, p.diagnostics.period_s)
         self.status = FusionStatus(self.live, self.cams, self.camera_ids, self.rig_path,
                                    self.diagnostics.name, steady_ns(), self._now_ns())
-        self.latency = self.status.latency
         self.diagnostics.add_task(self._diag_inputs)
         self.diagnostics.add_task(self._diag_pipeline)
         # Off until a set is pending; then armed for the moment it may be decided (no polling).
@@ -183,6 +181,11 @@ class FusionNode(Node):
         """Return the live core's ``Fusion``; None until every camera's calibration is known."""
         return self.live.fusion
 
+    @property
+    def release_armed(self) -> bool:
+        """Tell whether the release timer is armed: it is off while no set is pending."""
+        return not self._release_timer.is_canceled()
+
     # ------------------------------------------------------------------ parameters
     def _read_parameters(self) -> None:
         self.config_warnings = P.unknown_parameter_warnings(self)
@@ -197,12 +200,11 @@ class FusionNode(Node):
         self.camera_ids, self.layout, self.world_frame = (setup.camera_ids, setup.layout,
                                                           setup.world_frame)
         self.sync_config, self.fusion_config = setup.sync, setup.fusion   # completed
-        self.max_persons = p.limits.max_persons
         self.inputs = PersonsInputCheck(
             setup.rig, self.layout, self.rig_path, p.limits.max_persons,
             p.limits.max_message_bytes, setup.max_future_ns,
             p.input_image_size_tolerance_px, self.get_logger().warning)
-        self.rig, self._image_size_logged = self.inputs.rig, self.inputs.size_logged
+        self.rig = self.inputs.rig
         self._read_dynamic()
 
     def _read_dynamic(self) -> None:
@@ -284,8 +286,8 @@ class FusionNode(Node):
         self._rlog(f'{state.name}:{reason}', f'dropped Person2DArray of camera {state.name} '
                    f'on {state.topic}: {text}')
 
-    def _on_persons(self, cam: str, msg: Union[bytes, Person2DArray]) -> None:
-        """Take one input: serialised CDR (the raw subscription) or a ``Person2DArray``."""
+    def on_persons(self, cam: str, msg: Union[bytes, Person2DArray]) -> None:
+        """Take camera ``cam``'s input: serialised CDR (the raw subscription) or a message."""
         with self._lock:
             now, arrival = self._now_ns(), steady_ns()
             state = self.cams[cam]

@@ -39,7 +39,7 @@ TUNABLE = 'glibc.malloc.hugetlb'
 #: Environment variable that turns this off (``0``); any other value or none leaves it on.
 OPT_OUT = 'MV3DPOSE_HUGEPAGES'
 #: Set in a re-executed process so that it never re-executes again.
-_REEXECUTED = 'MV3DPOSE_HUGEPAGES_REEXEC'
+REEXECUTED = 'MV3DPOSE_HUGEPAGES_REEXEC'
 THP_MODE_FILE = '/sys/kernel/mm/transparent_hugepage/enabled'
 
 
@@ -80,12 +80,12 @@ def reexec_with_hugepages(argv: Optional[Sequence[str]] = None) -> None:
     its pid, arguments, open files and signal handling, so ``ros2 run``, launch and bringup see
     no difference. ``argv`` is the interpreter command line (default ``sys.orig_argv``).
     """
-    if os.environ.get(_REEXECUTED):
+    if os.environ.get(REEXECUTED):
         return
     env = with_hugepages(os.environ)
     if env.get('GLIBC_TUNABLES') == os.environ.get('GLIBC_TUNABLES'):
         return
-    env[_REEXECUTED] = '1'
+    env[REEXECUTED] = '1'
     args = list(sys.orig_argv if argv is None else argv)
     sys.stdout.flush()
     sys.stderr.flush()
