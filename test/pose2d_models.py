@@ -16,8 +16,9 @@
 Crafted pose models and images for the pose2d tests: no download, known detections.
 
 ``crafted_model`` writes a YOLO-pose ONNX whose "network" always returns the same two people,
-so the expected keypoints follow from the letterbox alone; ``fake_cache`` a model cache of
-such files at the input sizes and precisions a test needs; ``image_folder`` random frames.
+so the expected keypoints follow from the letterbox alone; ``yolo_case_model`` one laid out on
+an HD image with a duplicate and a low-score box besides; ``fake_cache`` a model cache of such
+files at the input sizes and precisions a test needs; ``image_folder`` random frames.
 """
 
 import hashlib
@@ -30,6 +31,7 @@ import numpy as np
 from onnx_min import make_constant_model
 
 W, H = 320, 240
+HD = (1080, 1920)          # the original image of ``yolo_case_model`` (Panoptic HD size)
 
 
 def crafted_model(tmp_path):
@@ -79,3 +81,51 @@ def fake_cache(tmp_path, sizes, int8=()):
             {'name': 'yolo11n-pose', 'family': 'yolo-pose', 'input_size': list(hw),
              'precision': precision, 'onnx_sha256': hashlib.sha256(data).hexdigest()}))
     return str(cache)
+
+
+def person_keypoints(rng, center, spread=120.0):
+    """Return 17 original-pixel keypoints around ``center`` and their box."""
+    kpts = np.asarray(center) + rng.uniform(-spread, spread, size=(17, 2))
+    return kpts, np.concatenate([kpts.min(0) - 10, kpts.max(0) + 10])
+
+
+def yolo_column(box_lb, kpts_in, score, conf):
+    """Build one [56] YOLO output column in network-input pixels."""
+    x0, y0, x1, y1 = box_lb
+    col = np.zeros(56, np.float32)
+    col[:5] = [(x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0, score]
+    col[5:] = np.concatenate([kpts_in, conf[:, None]], axis=1).reshape(-1)
+    return col
+
+
+def yolo_case_model(tmp_path):
+    """
+    Write a YOLO-pose ONNX whose output holds two people, a duplicate and a low-score box.
+
+    Return its path and the people: (keypoints, box, score, confidences) in ``HD`` pixels.
+    """
+    rng = np.random.default_rng(0)
+    lb = Letterbox.fit(HD, (640, 640))
+    out = np.zeros((1, 56, 8400), np.float32)
+    people = []
+    for col, (center, score) in zip((100, 5000), (((600, 500), 0.9), ((1400, 600), 0.5))):
+        kpts, box = person_keypoints(rng, center)
+        conf = rng.uniform(0.3, 1.0, 17).astype(np.float32)
+        conf[3] = 0.1                                     # below the keypoint threshold
+        box_in = lb.to_input(box.reshape(2, 2)).reshape(4)
+        out[0, :, col] = yolo_column(box_in, lb.to_input(kpts), score, conf)
+        people.append((kpts, box, score, conf))
+    dup = out[0, :, 100].copy()                           # same person, shifted 2 px
+    dup[0] += 2.0
+    dup[4] = 0.8
+    out[0, :, 200] = dup
+    low = out[0, :, 5000].copy()
+    low[4] = 0.2                                          # under the 0.25 score threshold
+    low[0] += 300
+    out[0, :, 7000] = low
+    data = make_constant_model([('images', np.float32, [1, 3, 640, 640])], {'output0': out},
+                               {'task': 'pose', 'kpt_shape': '[17, 3]',
+                                'author': 'Ultralytics', 'license': 'AGPL-3.0 License'})
+    path = tmp_path / 'yolo.onnx'
+    path.write_bytes(data)
+    return str(path), people

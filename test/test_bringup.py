@@ -369,3 +369,17 @@ def test_the_installed_launch_description_starts_the_process_list(rig):
     listed = rig_processes(rig=rig).processes
     assert [(n.node_package, n.node_executable) for n in nodes] == [
         ('mv3dpose_ros', p.executable) for p in listed]
+
+
+def test_bringup_shares_the_cores_among_the_cameras(capsys):
+    from mv3dpose_ros.nodes import bringup
+    assert [split_threads(n, 2) for n in (1, 2, 4)] == [2, 1, 1]
+    assert [split_threads(n, 16) for n in (1, 3, 4, 8, 32)] == [16, 5, 4, 2, 1]
+    rig = os.path.join(ROOT, 'config', 'rigs', 'panoptic_demo.yaml')
+    cams = ['00_03', '00_06', '00_12', '00_13']
+    assert bringup.main(['--rig', rig, '--cameras', *cams, '--dry-run']) == 0
+    out = capsys.readouterr().out
+    assert out.count(f'threads: {split_threads(4)}') == 4       # shipped threads: 0
+    assert bringup.main(['--rig', rig, '--cameras', *cams, '--dry-run',
+                         '--pose2d-param', 'model.threads:=3']) == 0
+    assert capsys.readouterr().out.count('threads: 3') == 4              # explicit value kept
