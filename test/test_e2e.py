@@ -31,8 +31,8 @@ import time
 
 import cv2
 from mv3dpose_ros.commands.bag import play
-from mv3dpose_ros.commands.demo import _recorder_cmd, _wait_for_nodes
-from mv3dpose_ros.commands.demo import _write_params, Pipeline, PLAUSIBLE_M, TRACKS_TOPIC
+from mv3dpose_ros.commands.demo import (Pipeline, PLAUSIBLE_M, recorder_cmd, TRACKS_TOPIC,
+                                        wait_for_nodes, write_params)
 from mv3dpose_ros.core.types import TrackState
 from mv3dpose_ros.io.tracks_jsonl import read_tracks
 from mv3dpose_ros.ros.bag_convert import bag_to_jsonl, openpose_to_bag, tracks_from_bag
@@ -117,14 +117,14 @@ def test_pose2sim_bag_replay_gives_the_tracks_of_mv3dpose_track(
     recorded = tmp_path / 'tracks_bag'
     try:
         # no shipped fusion.yaml: the node runs FusionConfig's defaults, as `track` does
-        params = _write_params(tmp_path / 'fusion.yaml', {'/**/fusion_node': {
+        params = write_params(tmp_path / 'fusion.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': calib, 'camera_ids': cams,
             'layout': 'body25b', 'smoothed_lag_frames': 3,
             # 60 fps: the synchroniser's slop must stay below half a frame period
             'sync': {'slop_s': 0.004}}})
         pipeline.start('fusion_node', ['fusion_node', '--ros-args', '--params-file', params])
-        pipeline.start('recorder', _recorder_cmd(recorded, [TRACKS_TOPIC, SMOOTHED_TOPIC]))
-        _wait_for_nodes(ros_context, pipeline, [persons_topic(c) for c in cams], 60.0)
+        pipeline.start('recorder', recorder_cmd(recorded, [TRACKS_TOPIC, SMOOTHED_TOPIC]))
+        wait_for_nodes(ros_context, pipeline, [persons_topic(c) for c in cams], 60.0)
         n = play(str(bag), rate=0.0, context=ros_context, quiet=True, wait_for_subscribers=60,
                  pace_topics=[TRACKS_TOPIC], pace_timeout=5.0)
         assert n == 400

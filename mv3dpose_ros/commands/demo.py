@@ -40,7 +40,7 @@ import signal
 import subprocess
 import sys
 import time
-from typing import Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 from mv3dpose_msgs.msg import TrackedSkeletonArray
 from mv3dpose_ros.commands.bag import play
@@ -164,7 +164,8 @@ class Pipeline:
             self.stop(name, timeout=10.0)
 
 
-def _write_params(path: Path, sections: Dict[str, dict]) -> str:
+def write_params(path: Path, sections: Dict[str, dict]) -> str:
+    """Write ``{node key: parameters}`` as a ROS params file at ``path``; return the path."""
     path.write_text(yaml.safe_dump({k: {'ros__parameters': v} for k, v in sections.items()},
                                    sort_keys=False))
     return str(path)
@@ -180,7 +181,8 @@ def _fusion_cmd(params: str) -> List[str]:
             '--params-file', params]
 
 
-def _recorder_cmd(output: Path, topics: Sequence[str]) -> List[str]:
+def recorder_cmd(output: Path, topics: Sequence[str]) -> List[str]:
+    """Return the command that records ``topics`` into the bag ``output``."""
     return [sys.executable, '-m', 'mv3dpose_ros.cli', 'bag', 'record', *topics,
             '-o', str(output), '-q']
 
@@ -316,13 +318,13 @@ def run_synthetic(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     pipeline = Pipeline(run_dir, env)
     output_bag = run_dir / 'output_bag'
     try:
-        params = _write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
+        params = write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': str(rig), 'camera_ids': cams,
             'layout': scene.layout, 'input_topic': input_topic_pattern(cams)}})
         pipeline.start('fusion_node', _fusion_cmd(params))
-        pipeline.start('recorder', _recorder_cmd(output_bag,
-                                                 [TRACKS_TOPIC, MARKERS_TOPIC, INFO_TOPIC]))
-        _wait_for_nodes(ctx, pipeline, [persons_topic(c) for c in cams], args.timeout)
+        pipeline.start('recorder', recorder_cmd(output_bag,
+                                                [TRACKS_TOPIC, MARKERS_TOPIC, INFO_TOPIC]))
+        wait_for_nodes(ctx, pipeline, [persons_topic(c) for c in cams], args.timeout)
         _say(f'nodes:     fusion_node (use_sim_time) and recorder up; playing at rate '
              f'{args.rate:g}')
     except BaseException:
@@ -423,14 +425,14 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
         for cam in cams:
             ns = camera_namespace(cam)
             # a node-specific section (after the shipped file) wins over its '/**' defaults
-            pose_params = _write_params(run_dir / f'pose2d_{ns}.yaml', {f'/{ns}/pose2d_node': {
+            pose_params = write_params(run_dir / f'pose2d_{ns}.yaml', {f'/{ns}/pose2d_node': {
                 'use_sim_time': True, 'camera_id': cam,
                 'model': {'name': args.model, 'path': model, 'threads': 1},
                 'image_qos': {'reliability': 'reliable'}, 'debug_image': False}})
             pipeline.start(f'pose2d_{ns}', [
                 'pose2d_node', '--ros-args', '-r', f'__ns:=/{ns}', '-r', 'image:=image_raw',
                 '--params-file', config_file('pose2d.yaml'), '--params-file', pose_params])
-        params = _write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
+        params = write_params(run_dir / 'fusion_params.yaml', {'/**/fusion_node': {
             'use_sim_time': True, 'rig_config': os.path.abspath(calibration),
             'camera_ids': cams, 'layout': layout, 'publish_tentative': True,
             # The player waits for every node after each time point, so a set may wait for
@@ -439,10 +441,10 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
             'sync': {'max_wait_s': 2.0},
             'input_topic': input_topic_pattern(cams)}})
         pipeline.start('fusion_node', _fusion_cmd(params))
-        pipeline.start('recorder', _recorder_cmd(
+        pipeline.start('recorder', recorder_cmd(
             output_bag, [TRACKS_TOPIC, MARKERS_TOPIC, INFO_TOPIC] + pose_topics))
-        _wait_for_nodes(ctx, pipeline, pose_topics + [image_topic(c) for c in cams],
-                        args.timeout, published=pose_topics)
+        wait_for_nodes(ctx, pipeline, pose_topics + [image_topic(c) for c in cams],
+                       args.timeout, published=pose_topics)
         _say(f'nodes:     {len(cams)} x pose2d_node, fusion_node, recorder up; the player '
              'waits for every node after each time point')
     except BaseException:
@@ -480,8 +482,9 @@ def run_images(args, run_dir: Path, env: Dict[str, str], ctx) -> dict:
     return summary
 
 
-def _wait_for_nodes(ctx, pipeline: Pipeline, inputs: Sequence[str], timeout: float,
-                    published: Sequence[str] = ()) -> None:
+def wait_for_nodes(ctx: Any, pipeline: Pipeline, inputs: Sequence[str], timeout: float,
+                   published: Sequence[str] = ()) -> None:
+    """Wait until ``inputs`` and the tracks are subscribed, the tracks and ``published`` fed."""
     node = Node('mv3dpose_demo_probe', context=ctx)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
