@@ -13,14 +13,15 @@
 # limitations under the License.
 
 """
-fusion_node with inputs whose image size is not the calibration's (issue 25, item 6).
+fusion_node with inputs whose image size is not the calibration's: cropped or resized views.
 
 A portrait rig calibrated at 1088x1920, as the Pose2Sim rig, whose first two cameras deliver
 1080x1920 video (a codec's crop) and whose third runs on a half-size stream: all are used. A
 landscape image against the portrait calibration is dropped as 'image_size'. The DDS harness
-is test_fusion_node.py's; every wait is bounded by a timeout.
+is ``fusion_harness``'s; every wait is bounded by a timeout.
 """
 
+from fusion_harness import base_ns, Harness    # the DDS harness of fusion_node
 from mv3dpose_ros.core.fusion.pipeline import Fusion, FusionConfig
 from mv3dpose_ros.core.geometry.calibration import save_rig_yaml
 from mv3dpose_ros.core.types import TrackState
@@ -34,7 +35,6 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
-from test_fusion_node import base_ns, Harness  # noqa: I100 - the DDS harness of fusion_node
 
 pytestmark = [pytest.mark.ros]
 

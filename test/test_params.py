@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-fusion_node parameters through real rcl argument parsing (issue 9 item 4).
+fusion_node parameters through real rcl argument parsing: files, overrides, launch, bringup.
 
 Each case builds the node from a command line the way a user, ``bringup`` or launch_ros
 would pass it (``rclpy.init(args=...)`` parses it with rcl), so the precedence tested is rcl's

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-fusion_node as its own process, fed at 60 fps without pacing to its output (issue 9).
+fusion_node as its own process, fed at 60 fps without pacing to its output: it keeps up.
 
 Detections of a simulated 4-camera rig are published at the real 60 fps rate on wall-clock
 stamps (as a recorded bag played at rate 1), with the shipped config/fusion.yaml defaults;
