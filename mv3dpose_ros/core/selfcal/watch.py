@@ -71,8 +71,12 @@ class WatchConfig:
     interval_s: float = 0.2         # at most one observation per this much stamp time
     min_confidence: float = 0.4     # keypoints below are not used
     min_points: int = 40            # joints in the window before a camera has an estimate
+    min_sets: int = 5               # ... from this many observed sets (not a few poses)
     baseline_s: float = 3.0         # estimates averaged into a baseline (and its noise)
     noise_factor: float = 3.0       # a camera's threshold is at least this times its noise
+    noise_s: float = 10.0           # the noise keeps being learned over about this long
+    min_sigmas: float = 4.0         # ... and the drift is this many standard errors of the
+    #                                 window's estimate (the points' spread fixes its axes)
     lead_ratio: float = 1.25        # 4 cameras or more: named if its drift leads the next
     #                                 camera's by this factor (in units of their thresholds)
     support_ratio: float = 1.25     # 3 cameras: named if the others' agreement on its
@@ -88,6 +92,9 @@ class WatchConfig:
     match_gate: float = 0.5         # detection to track: mean joint distance / 2D height
     triangulation_gate_px: float = 20.0   # leave-one-out points the others reproject worse
     #                                        than this are not used
+    outlier_view_px: float = 8.0    # a view this far off, and ...
+    outlier_view_ratio: float = 2.0  # ... this many times the next worst, is left out of a
+    #                                  point (where three views or more remain)
 
     @classmethod
     def of(cls, fusion_config: Any) -> 'WatchConfig':
@@ -122,6 +129,7 @@ class CameraWatch:
     drift_deg: float = float('nan')         # rotation since the baseline
     drift_axis_deg: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     threshold_deg: float = float('nan')     # drift that names it (warn_deg or its noise)
+    drift_sigmas: float = float('nan')      # the drift in standard errors of the estimate
     residual_px: float = float('nan')       # median reprojection of the others' points
     baseline_residual_px: float = float('nan')
     support_px: float = float('nan')        # how well the others agree on those points
@@ -154,7 +162,7 @@ class _Baseline:
         self.samples: List[np.ndarray] = []
         self.residuals: List[float] = []
         self.rotation: Optional[np.ndarray] = None
-        self.noise_deg = float('nan')
+        self.noise2 = float('nan')                 # mean squared drift [deg^2]
         self.residual_px = float('nan')
         self.supports: List[float] = []
         self.support_px = float('nan')
@@ -171,8 +179,8 @@ class _Baseline:
             return False
         u, _, vt = np.linalg.svd(np.mean(self.samples, axis=0))      # chordal mean
         self.rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
-        self.noise_deg = float(np.sqrt(np.mean(
-            [rotation_angle_deg(r @ self.rotation.T) ** 2 for r in self.samples])))
+        self.noise2 = float(np.mean(
+            [rotation_angle_deg(r @ self.rotation.T) ** 2 for r in self.samples]))
         self.residual_px = float(np.median(self.residuals))
         self.support_px = float(np.median(self.supports))
         self.samples, self.residuals, self.supports = [], [], []
@@ -249,6 +257,27 @@ def robust_rotation(observed: np.ndarray, predicted: np.ndarray, weight: np.ndar
     return rotation
 
 
+def rotation_information(observed: np.ndarray, predicted: np.ndarray, weight: np.ndarray,
+                         rotation: np.ndarray, sets: int) -> np.ndarray:
+    """
+    Return the ``[3, 3]`` information (inverse covariance, 1/deg^2) of a rotation estimate.
+
+    A small turn ``w`` moves a bearing ``b`` by ``w x b``: the points' spread decides how well
+    each axis is known (people in the middle of the image fix the roll poorly). The scatter is
+    the residuals' robust spread; the joints of one set share their errors (one pose, one
+    detector pass), so the sets, not the joints, count as independent.
+    """
+    b = predicted @ rotation.T
+    r = observed - b
+    sigma2 = (1.4826 * float(np.median(np.linalg.norm(r, axis=1)))) ** 2 / 2 + 1e-12
+    skew = np.zeros((len(b), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -b[:, 2], b[:, 1], -b[:, 0]
+    skew -= skew.transpose(0, 2, 1)
+    w = weight / max(float(weight.mean()), 1e-12)
+    info = np.einsum('n,nji,njk->ik', w, skew, skew) / sigma2
+    return info * (sets / max(len(b), 1)) * math.radians(1.0) ** 2
+
+
 def _bearings(xy: np.ndarray) -> np.ndarray:
     b = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
     return b / np.linalg.norm(b, axis=-1, keepdims=True)
@@ -267,6 +296,7 @@ class CalibrationWatch:
         self._projections = np.zeros((len(self.names), 3, 4))
         self._basis = np.zeros(0)
         self._last_ns: Optional[int] = None
+        self._added_ns: Dict[str, int] = {}       # when each camera's window last took a set
         self._set_projections()
 
     @classmethod
@@ -292,6 +322,7 @@ class CalibrationWatch:
             self._windows[name].clear()
             self.status[name] = CameraWatch(name, corrections=self.status[name].corrections)
         self._last_ns = None
+        self._added_ns.clear()
 
     def fused(self, fusion: Any, views: Mapping[str, np.ndarray], stamp: float,
               stamp_ns: int) -> Tuple[List[Track], List[WatchEvent]]:
@@ -323,15 +354,20 @@ class CalibrationWatch:
         cfg = self.config
         if not self.enabled or len(self.names) < 3:
             return []
-        if self._last_ns is not None and 0 <= stamp_ns - self._last_ns < cfg.interval_s * NS_PER_S:
-            return []
         if self._last_ns is not None and stamp_ns < self._last_ns:
             self.reset()                      # the clock went back: windows mean nothing
         self._last_ns = stamp_ns
+        # Each camera takes a set at most every interval_s (the cost), but every set it can
+        # use when views are sparse (dropped frames, a slow rig): its window fills anyway.
+        due = [n for n in self.names if n in views and (
+            n not in self._added_ns
+            or stamp_ns - self._added_ns[n] >= cfg.interval_s * NS_PER_S)]
+        if not due:
+            return []
         joints = np.array([t.joints for t in tracks
                            if t.state == TrackState.CONFIRMED and t.valid.sum() >= 4])
         if len(joints):
-            self._collect(views, joints, stamp_ns)
+            self._collect(views, joints, stamp_ns, due)
         return self._judge(stamp_ns)
 
     # ------------------------------------------------------------------ collecting
@@ -341,8 +377,8 @@ class CalibrationWatch:
             self._projections[c] = np.hstack([cam.R, cam.t[:, None]])
         self._basis = dlt_basis(self._projections) if self.names else np.zeros(0)
 
-    def _collect(self, views: Mapping[str, np.ndarray], joints: np.ndarray,
-                 stamp_ns: int) -> None:
+    def _collect(self, views: Mapping[str, np.ndarray], joints: np.ndarray, stamp_ns: int,
+                 due: Sequence[str]) -> None:
         """Match each camera's people to the tracks, triangulate leave-one-out, keep pairs."""
         cfg = self.config
         num_c, (num_t, num_j) = len(self.names), joints.shape[:2]
@@ -373,10 +409,17 @@ class CalibrationWatch:
             others[c, c * num_t:(c + 1) * num_t] = 0.0
         uu, vv = np.tile(u, (1, num_c, 1)), np.tile(v, (1, num_c, 1))
         x = triangulate_dlt(uu, vv, others, self._projections, basis=self._basis)
+        x, others = self._without_worst_view(x, uu, vv, others)
         support = self._support_px(x, uu, vv, others)
-        good = np.isfinite(x).all(axis=0) & (support < self.config.triangulation_gate_px)
+        # Two views place a point as well as their calibration and detections allow, and no
+        # better: with four cameras or more, points of three views or more only.
+        views = (others > 0).sum(axis=0)
+        good = np.isfinite(x).all(axis=0) & (support < self.config.triangulation_gate_px) & (
+            views >= min(3, num_c - 2))
         oldest = stamp_ns - int(cfg.window_s * NS_PER_S)
         for c, name in enumerate(self.names):
+            if name not in due:
+                continue
             block = slice(c * num_t, (c + 1) * num_t)
             tried = (w[c] > 0) & np.isfinite(x[:, block]).all(axis=0)
             ok = tried & good[block]
@@ -389,6 +432,7 @@ class CalibrationWatch:
             observed = _bearings(np.stack([u[c][ok], v[c][ok]], axis=1))[front]
             predicted = (in_cam / np.linalg.norm(in_cam, axis=1, keepdims=True))[front]
             residual = np.linalg.norm(cam.project(points[front]) - px[c][ok][front], axis=1)
+            self._added_ns[name] = stamp_ns
             self._windows[name].add(stamp_ns, observed, predicted, w[c][ok][front], residual,
                                     float(np.median(support[block][tried])), oldest)
 
@@ -404,6 +448,33 @@ class CalibrationWatch:
         mean = np.where(usable, diff, 0.0).sum(axis=2) / np.maximum(shared, 1)
         cost = np.where(shared >= 4, mean / np.maximum(height, 1.0)[:, None], np.nan)
         return gated_assignment(cost, self.config.match_gate)
+
+    def _view_errors_px(self, x: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Return ``[C, K, J]``: the reprojection error (px) of each point in every camera."""
+        ru, rv, depth = reproject(x, self._projections)
+        focal = np.array([self.cameras[n].focal for n in self.names])[:, None, None]
+        return np.where(depth > 0, np.hypot(ru - u, rv - v) * focal, np.inf)
+
+    def _without_worst_view(self, x: np.ndarray, u: np.ndarray, v: np.ndarray,
+                            w: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """
+        Triangulate again without each point's worst view where it stands out.
+
+        A turned camera pulls every triangulation it takes part in; where three views or more
+        remain, its view is the one that disagrees most, by far, and is left out, so the other
+        cameras' windows do not turn with it.
+        """
+        used = w > 0
+        err = np.where(used, self._view_errors_px(x, u, v), -1.0)
+        order = np.sort(err, axis=0)
+        worst, second = order[-1], order[-2]
+        drop = (used.sum(axis=0) >= 3) & (worst > self.config.outlier_view_px) & (
+            worst > self.config.outlier_view_ratio * second)
+        if not drop.any():
+            return x, w
+        w = np.where(drop[None] & (err == worst[None]), 0.0, w)
+        x2 = triangulate_dlt(u, v, w, self._projections, basis=self._basis)
+        return np.where(drop[None], x2, x), w
 
     def _support_px(self, x: np.ndarray, u: np.ndarray, v: np.ndarray,
                     others: np.ndarray) -> np.ndarray:
@@ -422,11 +493,13 @@ class CalibrationWatch:
         for name in self.names:
             st, win = self.status[name], self._windows[name]
             st.points = len(win.weight)
-            if st.points < cfg.min_points or stamp_ns - win.since_ns < (
-                    0.9 * cfg.window_s * NS_PER_S):
+            if st.points < cfg.min_points or len(win.support_px) < cfg.min_sets or (
+                    stamp_ns - win.since_ns < 0.9 * cfg.window_s * NS_PER_S):
                 continue
             estimate = robust_rotation(win.observed, win.predicted, win.weight, win.estimate)
             win.estimate = estimate
+            info = rotation_information(win.observed, win.predicted, win.weight, estimate,
+                                        len(win.support_px))
             st.residual_px = float(np.median(win.residual_px))
             st.support_px = float(np.median([v for _, v in win.support_px]))
             base = st.baselines.setdefault(named - {name}, _Baseline(stamp_ns))
@@ -435,14 +508,21 @@ class CalibrationWatch:
             st.support_ratio = st.support_px / max(base.support_px, 1e-6)
             drift = estimate @ base.rotation.T
             st.baseline_residual_px = base.residual_px
-            st.threshold_deg = max(cfg.warn_deg, cfg.noise_factor * base.noise_deg)
             st.drift_deg = rotation_angle_deg(drift)
+            if not st.named and st.over_since_ns is None:
+                # The noise goes on being learned while the camera agrees, slowly (a bump is
+                # a step, the wander of sparse views is not): noise_s of estimates.
+                rate = min(1.0, cfg.interval_s / cfg.noise_s)
+                base.noise2 = (1 - rate) * base.noise2 + rate * st.drift_deg ** 2
+            st.threshold_deg = max(cfg.warn_deg, cfg.noise_factor * math.sqrt(base.noise2))
             st.drift_axis_deg = rotation_vector_deg(drift)
+            st.drift_sigmas = math.sqrt(max(float(st.drift_axis_deg @ info @ st.drift_axis_deg),
+                                            0.0))
             if st.named:
                 events += self._follow_named(st, drift, stamp_ns)
                 continue
             st.level = OK
-            if st.drift_deg <= st.threshold_deg:
+            if st.drift_deg <= st.threshold_deg or st.drift_sigmas < cfg.min_sigmas:
                 st.over_since_ns = None
                 continue
             if st.over_since_ns is None:
