@@ -94,7 +94,8 @@ class Plan:
             self.rig = rig_processes(
                 args.params_file or DEFAULT_PARAMS, args.rig, args.cameras, args.namespace,
                 args.image_topic, parse_assignments(args.pose2d_param or [], '--pose2d-param'),
-                parse_assignments(args.fusion_param or [], '--fusion-param'),
+                {**parse_assignments(args.fusion_param or [], '--fusion-param'),
+                 **({'save_rig': os.path.abspath(args.save_rig)} if args.save_rig else {})},
                 pose2d=not args.no_pose2d, fusion=not args.no_fusion,
                 foxglove_port=args.foxglove, use_sim_time=args.use_sim_time)
         except PlanError as exc:
@@ -301,6 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='override a pose2d_node parameter (repeatable)')
     p.add_argument('--fusion-param', action='append', metavar='NAME:=VALUE',
                    help='override a fusion_node parameter (repeatable)')
+    p.add_argument('--save-rig', metavar='PATH', help='write the rig in use to PATH (rig '
+                   'YAML) at start and whenever the calibration watch corrects a camera '
+                   '(fusion_node save_rig)')
     p.add_argument('--use-sim-time', action='store_true', help='use_sim_time for all nodes')
     p.add_argument('--no-pose2d', action='store_true', help='start fusion_node only (2D poses '
                    'come from elsewhere, e.g. a bag or other hosts)')

@@ -147,6 +147,16 @@ class TfBridge:
                 f'{", ".join(t.child_frame_id for t in self.sent_static)}')
         return rig
 
+    def republish_cameras(self, rig: Mapping[str, Camera], camera_ids: Sequence[str],
+                          stamp: Any) -> None:
+        """Broadcast the camera poses again (a corrected rig); nothing with extrinsics from TF."""
+        if self.static_broadcaster is None or self.extrinsics_source == 'tf':
+            return
+        header = Header(stamp=stamp, frame_id=self.world_frame)
+        self.sent_static = camera_transforms({c: rig[c] for c in camera_ids}, header,
+                                             self.camera_frame)
+        self.static_broadcaster.sendTransform(self.sent_static)
+
     def publish_tracks(self, tracks: Sequence[Track], yaws: Sequence[Optional[float]],
                        header: Header) -> int:
         """Broadcast the frames of the confirmed tracks; return how many were sent."""

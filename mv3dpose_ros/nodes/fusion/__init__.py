@@ -25,4 +25,6 @@ node wires to topics); here is what only this node needs around it.
 - :mod:`.inputs`: per-camera input statistics and the checks of each ``Person2DArray``.
 - :mod:`.diagnostics`: the node's ``/diagnostics`` statuses.
 - :mod:`.log_bridge`: the core's Python ``logging`` forwarded to the node's ROS logger.
+- :mod:`.rig_output`: the rig in use (corrected by the calibration watch) on ``~/rig``, in the
+  ``save_rig`` file and the cameras' static TF.
 """

@@ -135,6 +135,9 @@ class FusionNodeParams:
     input_max_future_s: float = 2.0  # Drop inputs stamped more than this [s] ahead of the node
     #                                  clock (skipped while the clock is zero)
     log_throttle_s: float = 5.0  # Rate limit [s] of repeated warnings per camera and reason
+    save_rig: str = ''  # Rig YAML to write the rig in use to, at start and whenever the
+    #                     calibration watch corrects a camera (fusion.calibration_watch); empty =
+    #                     none (~/rig publishes it either way)
     diagnostics: DiagnosticsParams = field(default_factory=DiagnosticsParams)
     markers: MarkerParams = field(default_factory=MarkerParams, metadata=_DYNAMIC)
 

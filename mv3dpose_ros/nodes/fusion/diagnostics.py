@@ -16,7 +16,8 @@
 fusion_node's ``/diagnostics``: camera inputs, synchroniser, tracking, calibration, clock.
 
 One status per camera input, then the synchroniser, tracking, calibration and clock ones,
-with the figures the node's tests and the benches read.
+with the figures the node's tests and the benches read, and one per camera of the calibration
+watch (``core.selfcal.watch``: OK / WARN / ERROR, drift, reprojection residual).
 
 ``FusionStatus`` reads the node's live core (``core.live.loop.LiveFusion``), its per-camera input
 statistics (``.inputs.CameraInputStats``) and the output windows it keeps (latency,
@@ -194,7 +195,38 @@ class FusionStatus:
             f'{len(ids)} cameras from {self.rig_path}',
             values={'rig_config': self.rig_path, **{f'{c} problem': p
                                                     for c, p in problems.items()}})
-        return [sync_status, track_status, calib]
+        return [sync_status, track_status, calib] + self.watch()
+
+    def watch(self) -> List[Any]:
+        """Return one status per camera: how its pose agrees with the rig's people."""
+        watch = self.live.watch
+        if not watch.enabled or not watch.names:
+            return []
+        levels = {'OK': OK, 'WARN': WARN, 'ERROR': ERROR}
+        out = []
+        for cam in watch.names:
+            st = watch.status[cam]
+            if not math.isfinite(st.drift_deg):
+                message = (f'learning its baseline ({st.points} joints in the window)'
+                           if st.points else 'no person seen with the others yet')
+            elif st.named:
+                message = (f'turned {st.drift_deg:.2f} deg since its baseline ('
+                           f'{watch.config.mode}: ' + ('left out' if cam in watch.excluded()
+                                                       else 'named') + ')')
+            else:
+                message = f'agrees with the rig (drift {st.drift_deg:.2f} deg)'
+            out.append(make_status(
+                self.name(f'{cam} calibration watch'), levels[st.level], message,
+                hardware_id=cam, values={
+                    'calibration': st.level, 'mode': watch.config.mode,
+                    'drift (deg)': st.drift_deg,
+                    'drift about x, y, z (deg)': ', '.join(f'{v:.2f}'
+                                                           for v in st.drift_axis_deg),
+                    'drift threshold (deg)': st.threshold_deg,
+                    'residual median (px)': st.residual_px,
+                    'baseline residual median (px)': st.baseline_residual_px,
+                    'joints in window': st.points, 'corrections': st.corrections}))
+        return out
 
     def clock(self, node_now: int, steady: int, sim: bool, stall_ns: int) -> Any:
         """Node clock status: under use_sim_time, ERROR naming /clock when it stopped."""

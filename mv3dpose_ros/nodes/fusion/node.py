@@ -49,6 +49,7 @@ from mv3dpose_ros.nodes.fusion.config import (check_setup, ConfigError, dynamic_
 from mv3dpose_ros.nodes.fusion.diagnostics import FusionStatus
 from mv3dpose_ros.nodes.fusion.inputs import camera_from_info, CameraInputStats, PersonsInputCheck
 from mv3dpose_ros.nodes.fusion.log_bridge import RosLogHandler
+from mv3dpose_ros.nodes.fusion.rig_output import RigOutput
 from mv3dpose_ros.ros import params as P
 from mv3dpose_ros.ros.diagnostics import Diagnostics, RateLimitedLog
 from mv3dpose_ros.ros.frames import Headings, pose_array_cdr, root_poses
@@ -117,12 +118,16 @@ class FusionNode(Node):
         # Standard output beside ~/tracks: the root poses of the same skeletons (ros/frames.py).
         self.poses_pub = self._publisher(PoseArray, '~/poses', reliable_qos(10))
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset_request)
+        self.rig_out = RigOutput(self, self.tf, self.world_frame, self.camera_ids,
+                                 self.params.save_rig)
 
         log = self.get_logger()
         self.live = LiveFusion(
             self.camera_ids, self.layout, self.sync_config, self.fusion_config,
             self.params.publish_tentative, self.params.smoothed_lag_frames,
-            LiveLog(info=log.info, warning=log.warning, throttled=self._rlog),
+            LiveLog(info=log.info, warning=log.warning, throttled=self._rlog,
+                    rig=lambda cams: self.rig_out.publish(cams, 'corrected by the '
+                                                          'calibration watch')),
             wants_smoothed=lambda: self.smoothed_pub is not None and
             self.smoothed_pub.get_subscription_count() > 0)
         self.cams: Dict[str, CameraInputStats] = {}
@@ -245,6 +250,7 @@ class FusionNode(Node):
     # ------------------------------------------------------------------ calibration
     def _build_fusion(self) -> None:
         cameras = self.live.start(self.rig).cameras
+        self.rig_out.publish(self.live.cameras, f'the rig in use at start ({self.rig_path})')
         for c, cam in zip(self.camera_ids, cameras):
             self.get_logger().info(
                 f'camera {c}: {cam.width}x{cam.height} px, f {cam.focal:.1f} px, centre '
