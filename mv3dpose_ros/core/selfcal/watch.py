@@ -75,7 +75,7 @@ class WatchConfig:
     baseline_s: float = 3.0         # estimates averaged into a baseline (and its noise)
     noise_factor: float = 3.0       # a camera's threshold is at least this times its noise
     noise_s: float = 10.0           # the noise keeps being learned over about this long
-    min_sigmas: float = 4.0         # ... and the drift is this many standard errors of the
+    min_sigmas: float = 3.0         # ... and the drift is this many standard errors of the
     #                                 window's estimate (the points' spread fixes its axes)
     lead_ratio: float = 1.25        # 4 cameras or more: named if its drift leads the next
     #                                 camera's by this factor (in units of their thresholds)
@@ -509,7 +509,7 @@ class CalibrationWatch:
             drift = estimate @ base.rotation.T
             st.baseline_residual_px = base.residual_px
             st.drift_deg = rotation_angle_deg(drift)
-            if not st.named and st.over_since_ns is None:
+            if not st.named and st.drift_deg <= st.threshold_deg:
                 # The noise goes on being learned while the camera agrees, slowly (a bump is
                 # a step, the wander of sparse views is not): noise_s of estimates.
                 rate = min(1.0, cfg.interval_s / cfg.noise_s)
