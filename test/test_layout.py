@@ -252,11 +252,12 @@ def test_the_ros_free_packages_load_without_rclpy():
 def test_every_module_is_in_its_package_map():
     """Each package's docstring names each of its modules (``:mod:`.name```): a real map."""
     missing = []
-    for package in sorted(os.listdir(PACKAGE)):
+    packages = sorted(os.path.relpath(folder, PACKAGE) for folder, dirs, files in
+                      os.walk(PACKAGE) if '__init__.py' in files and folder != PACKAGE
+                      and '__pycache__' not in folder)
+    for package in packages:         # nested ones too (core/fusion, nodes/fusion, ros/system)
         path = os.path.join(PACKAGE, package)
         init = os.path.join(path, '__init__.py')
-        if not os.path.isfile(init):
-            continue
         doc = ast.get_docstring(ast.parse(open(init).read())) or ''
         for name in sorted(os.listdir(path)):
             module = name[:-3] if name.endswith('.py') else name

@@ -20,17 +20,17 @@ record rigs. Everything here is rclpy-free so offline tools and tests can use it
 writes are standard rosbag2 v9 directories that ``ros2 bag play``, RViz and Foxglove open on a
 full install. Import from here (``from mv3dpose_ros.io.bag import BagReader``); the modules:
 
-- ``files``: what a bag is on disk (directory, ``metadata.yaml``, storage files), ``BagError``,
+- :mod:`.files`: what a bag is on disk (directory, ``metadata.yaml``, storage files), ``BagError``,
   the storage names, ``is_bag`` / ``bag_path_type`` for dispatch and overwrite checks.
-- ``typestore``: the one typestore (``Stores.ROS2_JAZZY`` plus every ``.msg`` of
+- :mod:`.typestore`: the one typestore (``Stores.ROS2_JAZZY`` plus every ``.msg`` of
   ``mv3dpose_msgs``), ``serialize`` / ``deserialize`` of rosbags objects, ``make_qos``.
-- ``crc``: integrity: MCAP chunk and summary CRCs, the sqlite3 key table, ``verify_bag``.
-- ``reader``: ``BagReader`` (every library failure a ``BagError`` naming the file, CRCs
+- :mod:`.crc`: integrity: MCAP chunk and summary CRCs, the sqlite3 key table, ``verify_bag``.
+- :mod:`.reader`: ``BagReader`` (every library failure a ``BagError`` naming the file, CRCs
   checked while reading), ``check_bag``.
-- ``writer``: ``BagWriter`` (atomic: a hidden partial directory renamed into place on success;
+- :mod:`.writer`: ``BagWriter`` (atomic: a hidden partial directory renamed into place on success;
   ``checkpoint`` survives SIGKILL), ``partial_dirs`` and ``writer_alive`` (a lock tells
   running writers from dead ones).
-- ``salvage``: a killed recording's partial directory turned into a complete bag
+- :mod:`.salvage`: a killed recording's partial directory turned into a complete bag
   (``mv3dpose bag recover``).
 """
 
