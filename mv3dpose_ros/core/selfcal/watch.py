@@ -314,7 +314,11 @@ class CalibrationWatch:
         """Return the cameras the fusion should leave out now (exclude and correct modes)."""
         if self.config.mode not in ('exclude', 'correct'):
             return []
-        return [n for n in self.names if self.status[n].named]
+        # With fewer than min_agreeing others, leaving a camera out leaves a rig that may track
+        # worse than with it: only a camera turned past error_deg is left out then.
+        return [n for n in self.names if self.status[n].named and (
+            self._agreeing(n) >= self.config.min_agreeing
+            or self.status[n].drift_deg > self.config.error_deg)]
 
     def reset(self) -> None:
         """Forget every window and baseline (a rig change, a clock jump)."""
@@ -581,8 +585,9 @@ class CalibrationWatch:
             todo = 'it is left out of the fusion until it agrees again'
         elif agreeing < cfg.min_agreeing:
             todo = (f'only {agreeing} other camera(s) agree with the rig (need '
-                    f'{cfg.min_agreeing} to correct one): left out of the fusion, not '
-                    'corrected; check its mount')
+                    f'{cfg.min_agreeing} to correct one): not corrected, '
+                    + ('left out of the fusion' if st.drift_deg > cfg.error_deg else
+                       f'still used (under {cfg.error_deg:g} deg)') + '; check its mount')
         else:
             todo = 'it is left out of the fusion while its correction is estimated'
         message = (f"camera '{st.name}' disagrees with the rig: turned {st.drift_deg:.2f} deg "
