@@ -20,6 +20,7 @@ The ROS 2 nodes: thin adapters that wire ``core`` and ``pose2d`` to topics and p
 - :mod:`.fusion`: fusion_node and its parts (parameters, input checks, diagnostics): N cameras'
   ``Person2DArray`` in, tracked 3D skeletons out (the live core).
 - :mod:`.bringup`: one pose2d_node per camera plus fusion_node from one rig and one parameter set.
+- :mod:`.calibration_phase`: ``bringup --calibrate``: record the people, calibrate, then track.
 - :mod:`.processes`: the processes of a rig, the one list bringup and the launch file start.
 - :mod:`.image_publisher`: a folder of images or a video file as a free-running camera.
 - :mod:`.foxglove_view`: a live web view of the pipeline over the Foxglove WebSocket protocol.

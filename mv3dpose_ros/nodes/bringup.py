@@ -60,6 +60,7 @@ import threading
 import time
 from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
+from mv3dpose_ros.nodes.calibration_phase import recorded_topics, run_phase
 from mv3dpose_ros.nodes.processes import (DEFAULT_IMAGE_TOPIC, DEFAULT_NAMESPACE,
                                           DEFAULT_PARAMS, parse_assignments, PlanError,
                                           ProcessSpec, rig_processes)
@@ -219,7 +220,8 @@ class Supervisor:
         """Start everything, supervise until a stop request, then stop; return the exit code."""
         self.remove_stale_shm()
         for name in self.commands:
-            self.start(name)
+            if name not in self.procs:       # --calibrate started the pose2d nodes before
+                self.start(name)
         restart_at: Dict[str, float] = {}
         while not self.stopping:
             for name, due in list(restart_at.items()):
@@ -305,6 +307,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--save-rig', metavar='PATH', help='write the rig in use to PATH (rig '
                    'YAML) at start and whenever the calibration watch corrects a camera '
                    '(fusion_node save_rig)')
+    p.add_argument('--calibrate', action='store_true', help='start from the intrinsics of '
+                   '--rig: record the pose2d nodes while people walk, estimate the extrinsics '
+                   'into --save-rig (mv3dpose calibrate), then start fusion_node on it')
+    p.add_argument('--calibrate-s', type=float, default=60.0, metavar='S', help='--calibrate: '
+                   'seconds of people walking to record per attempt (default 60)')
+    p.add_argument('--calibrate-attempts', type=int, default=3, metavar='N', help='--calibrate:'
+                   ' record again this many times in all while data is missing (default 3)')
     p.add_argument('--use-sim-time', action='store_true', help='use_sim_time for all nodes')
     p.add_argument('--no-pose2d', action='store_true', help='start fusion_node only (2D poses '
                    'come from elsewhere, e.g. a bag or other hosts)')
@@ -331,6 +340,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     if args.no_pose2d and args.no_fusion:
         parser.error('--no-pose2d and --no-fusion together start nothing')
+    if args.calibrate and (not args.save_rig or args.no_pose2d or args.no_fusion):
+        parser.error('--calibrate needs --save-rig RIG and both the pose2d and fusion nodes')
+    track = argparse.Namespace(**{**vars(args), 'rig': args.save_rig, 'no_pose2d': True})
+    if args.calibrate:              # the pose2d nodes first, fusion_node on the new rig after
+        args.no_fusion, args.foxglove = True, None
     plan = Plan(args)
     fd, override_file = tempfile.mkstemp(prefix='mv3dpose_bringup_', suffix='.yaml')
     try:
@@ -344,6 +358,9 @@ def main(argv: Optional[List[str]] = None) -> int:
             print('# generated override params file (passed last):')
             print(yaml.safe_dump(plan.overrides, sort_keys=False), end='')
             print(f'# Fast DDS profile: {plan.dds_profile or "none (Fast DDS defaults)"}')
+            if args.calibrate:
+                print(f'# --calibrate: then mv3dpose bag record ({args.calibrate_s:g} s), '
+                      f'mv3dpose calibrate -o {args.save_rig}, fusion_node on it')
             return 0
         sup = Supervisor(commands, args.respawn, args.stop_timeout, env=plan.env,
                          clean_shm=not args.keep_shm and uses_fast_dds(plan.env))
@@ -351,12 +368,29 @@ def main(argv: Optional[List[str]] = None) -> int:
         signal.signal(signal.SIGTERM, sup.request_stop)
         sup.say(f'rig {plan.rig_path}: cameras {", ".join(plan.cameras)}; Fast DDS profile '
                 f'{plan.dds_profile or "none"}')
+        if args.calibrate:
+            if not _calibrate(args, plan, sup):
+                return sup.stop() or (1 if sup.failed else 0)
+            track_plan = Plan(track)
+            with open(override_file + '.track', 'w', encoding='utf-8') as f:
+                yaml.safe_dump(track_plan.overrides, f, sort_keys=False)
+            sup.commands.update(track_plan.commands(override_file + '.track'))
         return sup.run()
     finally:
-        try:
-            os.unlink(override_file)
-        except OSError:
-            pass
+        for path in (override_file, override_file + '.track'):
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+
+
+def _calibrate(args: argparse.Namespace, plan: Plan, sup: Supervisor) -> bool:
+    """Run the calibration phase (``nodes.calibration_phase``); False if it failed."""
+    cli = _executable(ProcessSpec('mv3dpose', 'mv3dpose', 'mv3dpose', 'mv3dpose_ros.cli'))
+    return run_phase(sup, sup.start, pose2d=list(sup.commands), mv3dpose=cli,
+                     topics=recorded_topics(plan.cameras, args.namespace, args.image_topic),
+                     intrinsics=plan.rig_path, rig=os.path.abspath(args.save_rig),
+                     seconds=args.calibrate_s, attempts=args.calibrate_attempts, env=plan.env)
 
 
 if __name__ == '__main__':
