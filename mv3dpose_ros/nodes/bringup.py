@@ -60,7 +60,7 @@ import threading
 import time
 from typing import Any, Deque, Dict, List, Optional, Sequence, Tuple
 
-from mv3dpose_ros.nodes.calibration_phase import recorded_topics, run_phase
+from mv3dpose_ros.nodes.calibration_phase import end, recorded_topics, run_phase
 from mv3dpose_ros.nodes.processes import (DEFAULT_IMAGE_TOPIC, DEFAULT_NAMESPACE,
                                           DEFAULT_PARAMS, parse_assignments, PlanError,
                                           ProcessSpec, rig_processes)
@@ -314,6 +314,10 @@ def build_parser() -> argparse.ArgumentParser:
                    'seconds of people walking to record per attempt (default 60)')
     p.add_argument('--calibrate-attempts', type=int, default=3, metavar='N', help='--calibrate:'
                    ' record again this many times in all while data is missing (default 3)')
+    p.add_argument('--calibrate-pose2d-param', action='append', metavar='NAME:=VALUE',
+                   help='--calibrate: a pose2d_node parameter for the calibration phase only '
+                   '(e.g. model.input_size:=640x384); the nodes restart with the tracking '
+                   'settings after')
     p.add_argument('--use-sim-time', action='store_true', help='use_sim_time for all nodes')
     p.add_argument('--no-pose2d', action='store_true', help='start fusion_node only (2D poses '
                    'come from elsewhere, e.g. a bag or other hosts)')
@@ -342,9 +346,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         parser.error('--no-pose2d and --no-fusion together start nothing')
     if args.calibrate and (not args.save_rig or args.no_pose2d or args.no_fusion):
         parser.error('--calibrate needs --save-rig RIG and both the pose2d and fusion nodes')
-    track = argparse.Namespace(**{**vars(args), 'rig': args.save_rig, 'no_pose2d': True})
+    restart = bool(args.calibrate and args.calibrate_pose2d_param)
+    track = argparse.Namespace(**{**vars(args), 'rig': args.save_rig, 'no_pose2d': not restart})
     if args.calibrate:              # the pose2d nodes first, fusion_node on the new rig after
         args.no_fusion, args.foxglove = True, None
+        args.pose2d_param = [*(args.pose2d_param or []), *(args.calibrate_pose2d_param or [])]
     plan = Plan(args)
     fd, override_file = tempfile.mkstemp(prefix='mv3dpose_bringup_', suffix='.yaml')
     try:
@@ -374,6 +380,10 @@ def main(argv: Optional[List[str]] = None) -> int:
             track_plan = Plan(track)
             with open(override_file + '.track', 'w', encoding='utf-8') as f:
                 yaml.safe_dump(track_plan.overrides, f, sort_keys=False)
+            if restart:             # the pose2d nodes again, with the tracking settings
+                sup.say('restarting the pose2d nodes with the tracking settings')
+                for name in list(sup.procs):
+                    end(sup.procs.pop(name), args.stop_timeout)
             sup.commands.update(track_plan.commands(override_file + '.track'))
         return sup.run()
     finally:

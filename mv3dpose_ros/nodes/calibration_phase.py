@@ -46,6 +46,22 @@ PROGRESS_EVERY_S = 5.0
 READY_MARK = 'persons_2d ['
 
 
+def end(proc: subprocess.Popen, timeout: float = 20.0) -> int:
+    """Stop ``proc``'s session: SIGINT, then SIGKILL after ``timeout`` s; return its status."""
+    for sig, wait in ((signal.SIGINT, timeout), (signal.SIGKILL, 5.0)):
+        if proc.poll() is not None:
+            break
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(wait)
+        except subprocess.TimeoutExpired:
+            pass
+    return proc.wait(5.0)
+
+
 def recorded_topics(cameras: Sequence[str], namespace: str, image_topic: str) -> List[str]:
     """Return the topics to record: each camera's ``persons_2d`` and ``camera_info``."""
     persons = namespace.rstrip('/') + '/persons_2d'
@@ -84,20 +100,10 @@ class CalibrationPhase:
         return proc
 
     def _end(self, proc: subprocess.Popen, timeout: float = 20.0) -> int:
-        """Stop ``proc`` (SIGINT, then SIGKILL after ``timeout``); return its exit status."""
-        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGKILL, 5.0)):
-            if proc.poll() is not None:
-                break
-            try:
-                os.killpg(proc.pid, sig)
-            except ProcessLookupError:
-                break
-            try:
-                proc.wait(wait)
-            except subprocess.TimeoutExpired:
-                pass
+        """Stop a command child; return its exit status once its output is forwarded."""
+        code = end(proc, timeout)
         proc.reader.join(timeout=2.0)                                 # type: ignore
-        return proc.wait(5.0)
+        return code
 
     def _trouble(self) -> bool:
         """Return True (and set ``reason``) on a stop request or a dead pose2d node."""
