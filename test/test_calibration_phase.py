@@ -47,6 +47,8 @@ FAKE_CLI = textwrap.dedent("""
     code = int(open(sys.argv[-1] + '.code').read().split()[0])
     if code == 2:
         print('mv3dpose calibrate: too few frames with people in two cameras (3 < 10)')
+    if code == 3:
+        print('camera  placed\\n\\nnot placed:\\n  cam_b: shares no person with another camera')
     sys.exit(code)
 """)
 
@@ -100,7 +102,11 @@ class FakeSupervisor:
         calibration_phase.end(self.procs['pose2d_node[cam_a]'], 5.0)
 
 
-@pytest.mark.parametrize('codes, ok', [((2, 2), False), ((2, 0), True)])
+WHY = {2: 'too few frames with people in two cameras (3 < 10)',
+       3: 'not placed: cam_b: shares no person with another camera'}
+
+
+@pytest.mark.parametrize('codes, ok', [((2, 2), False), ((2, 0), True), ((3, 0), True)])
 def test_missing_data_is_said_in_one_line_and_recorded_again(tmp_path, monkeypatch, codes, ok):
     script = tmp_path / 'fake_cli.py'
     script.write_text(FAKE_CLI)
@@ -127,9 +133,9 @@ def test_missing_data_is_said_in_one_line_and_recorded_again(tmp_path, monkeypat
     assert 'bag record: wrote bag: 10 messages' in log, log
     missing = [ln for ln in sup.lines if ln.startswith('calibration: not enough data: ')]
     assert len(missing) == (2 if not ok else 1), log
-    assert 'too few frames with people in two cameras (3 < 10); recording again' in missing[0]
+    assert f'{WHY[codes[0]]}; recording again' in missing[0], log
     if ok:
         assert 'calibration: wrote ' in log and not sup.failed
     else:
         assert 'no attempts left' in missing[-1] and sup.failed
-        assert phase.reason.startswith('calibration failed 2 times: too few frames'), log
+        assert phase.reason == f'calibration failed 2 times: {WHY[2]}', log

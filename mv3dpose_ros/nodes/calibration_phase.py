@@ -176,11 +176,14 @@ class CalibrationPhase:
             time.sleep(0.2)
         proc.reader.join(timeout=2.0)                                 # type: ignore
         code = proc.returncode
-        if code not in (0, 1):
-            lines = [ln for ln in proc.lines if ln.strip()]           # type: ignore
-            why = next((ln for ln in reversed(lines) if 'not placed' in ln or 'error' in ln
-                        .lower()), lines[-1] if lines else 'no output')
-            self.reason = why.split(': ', 1)[-1] if why.startswith('mv3dpose') else why
+        lines = [ln for ln in proc.lines if ln.strip()]               # type: ignore
+        if code == 3 and 'not placed:' in lines:      # the report's list: '  NAME: why'
+            self.reason = 'not placed: ' + '; '.join(
+                ln.strip() for ln in lines[lines.index('not placed:') + 1:]
+                if ln.startswith('  '))
+        elif code not in (0, 1):
+            last = lines[-1] if lines else 'no output'
+            self.reason = last.split(': ', 1)[-1] if last.startswith('mv3dpose') else last
         elif code == 1:
             self.reason = f'calibrate could not write {self.rig}'
         return code
