@@ -23,6 +23,7 @@ score (mean joint confidence, faded over ``max_coast_s`` unobserved) and the cam
 """
 
 from itertools import compress
+from operator import attrgetter
 from typing import List, Optional, Tuple
 
 from mv3dpose_ros.core.fusion.config import FusionConfig
@@ -39,6 +40,9 @@ BODY_ROOT_VARIANCE = 0.15 ** 2
 _MISSING, _PREDICTED = int(JointState.MISSING), int(JointState.PREDICTED)
 _TRACK_STATES = {int(s): s for s in TrackState}
 _SOURCES = {int(s): s for s in PositionSource}
+_BY_ID = attrgetter('track_id')
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
 
 
 class TrackAssembly:
@@ -60,20 +64,18 @@ class TrackAssembly:
         det, previous, kal = upd.detection, upd.previous, upd.filtered
         tr: Tracks = self.tracker.tracks
         num_t, num_j = len(tr), self.layout.num_joints
-        seen = det >= 0
-        if seen.all():
-            z, conf_obs = tri.joints.take(det, axis=0), tri.confidence.take(det, axis=0)
+        z, r = upd.measurement, upd.measurement_variance      # the tracker's gathers
+        if upd.complete:
+            conf_obs = tri.confidence.take(det, axis=0)
             num_views, err = tri.num_views.take(det, axis=0), tri.error_px.take(det, axis=0)
-            r = s.variance.take(det, axis=0)
         else:                            # row K of the padded arrays is "not observed"
-            z = np.concatenate((tri.joints, np.full((1, num_j, 3), np.nan))).take(det, axis=0)
             conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j)))).take(det, axis=0)
             num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int))
                                        ).take(det, axis=0)
             err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan))).take(det, axis=0)
-            r = np.concatenate((s.variance, np.full((1, num_j), np.nan))).take(det, axis=0)
         accepted = kal.accepted
-        if not accepted.all():           # a rejected observation is not an observation
+        every = bool(accepted.all())
+        if not every:                    # a rejected observation is not an observation
             z = np.where(accepted[..., None], z, np.nan)
             r = np.where(accepted, r, np.nan)
             num_views = np.where(accepted, num_views, 0)
@@ -85,7 +87,7 @@ class TrackAssembly:
             r = np.where(only, rays.variance, r)
             num_views = num_views + rays.views
         observed = accepted
-        if observed.all():
+        if every:
             conf_last = conf_obs
         else:
             conf_prev = np.where((previous >= 0)[:, None], tr.confidence, 0.0)
@@ -106,10 +108,9 @@ class TrackAssembly:
         missing = state == _MISSING
         confidence = np.where(missing, 0.0, np.where(state == _PREDICTED, 0.5, 1.0) * conf_last)
         velocity = tr.velocity
-        cov = np.full((num_t, 3, 3), np.nan)
         source = np.full(num_t, int(PositionSource.HIPS), dtype=np.uint8)
         if self._root is None:
-            position = np.full((num_t, 3), np.nan)
+            position, cov = np.full((num_t, 3), np.nan), np.full((num_t, 3, 3), np.nan)
         else:
             # mean of the two root joints, written out (a two-element np.mean costs more)
             left, right = self._root
@@ -118,16 +119,16 @@ class TrackAssembly:
             no_hips = ~np.isfinite(position[:, 0])
             if no_hips.any():            # never a silent origin: the body's centre instead
                 position, root_var = position.copy(), root_var.copy()
-                body = centroid(np.where(np.isfinite(joints[no_hips]), joints[no_hips],
-                                         tr.pose[no_hips]))
+                held, held_var = joints[no_hips], joint_var[no_hips]
+                body = centroid(np.where(np.isfinite(held), held, tr.pose[no_hips]))
                 position[no_hips] = body
-                known = ~missing[no_hips] & np.isfinite(joint_var[no_hips])
-                spread = np.where(known, joint_var[no_hips], 0.0).sum(axis=1) \
+                known = ~missing[no_hips] & np.isfinite(held_var)
+                spread = np.where(known, held_var, 0.0).sum(axis=1) \
                     / np.maximum(known.sum(axis=1), 1)
                 root_var[no_hips] = spread + BODY_ROOT_VARIANCE
                 source[no_hips] = np.where(np.isfinite(body[:, 0]), int(PositionSource.BODY),
                                            int(PositionSource.NONE))
-            cov = root_var[:, None, None] * np.eye(3)
+            cov = root_var[:, None, None] * _EYE3
             filt = self.tracker.filter
             v = filt.v
             root_ok = (filt.count[:, left] >= 2) & (filt.count[:, right] >= 2) \
@@ -156,7 +157,7 @@ class TrackAssembly:
                      measurement=z[i], measurement_variance=r[i], first_seen_ns=first_ns[i],
                      last_observed_ns=last_ns[i], position_source=_SOURCES[sources[i]])
                for i in range(num_t)]
-        out.sort(key=lambda t: t.track_id)
+        out.sort(key=_BY_ID)
         return out
 
     def tombstones(self, dead: Tracks) -> List[Track]:

@@ -78,8 +78,12 @@ class DuplicateTracks:
             self._alike.clear()
             return
         # pairs no camera saw both of now (two people side by side share cameras): the
-        # common case of a complete set has none, and costs one product
-        c = s.track_cameras[live].astype(np.float64)
+        # common case of a complete set has none (a camera saw them all)
+        seen = s.track_cameras[live]
+        if seen.all(axis=0).any():
+            self._alike.clear()
+            return
+        c = seen.astype(np.float64)
         apart = (c @ c.T == 0) & upper_triangle(len(live))
         if not apart.any():
             self._alike.clear()

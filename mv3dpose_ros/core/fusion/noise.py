@@ -22,6 +22,8 @@ times its depth in the cameras that saw it, squared, divided by their number: th
 smooth as much as the detector's noise on this rig calls for, on any data set.
 """
 
+from typing import Optional
+
 from mv3dpose_ros.core.fusion.config import FusionConfig
 from mv3dpose_ros.core.geometry.triangulation import Triangulation
 from mv3dpose_ros.core.tracking.tracker import centroid
@@ -70,18 +72,20 @@ class NoiseModel:
         else:
             self._estimate += (sigma - self._estimate) / min(self._sets, 200)
 
-    def variance(self, tri: Triangulation) -> np.ndarray:
+    def variance(self, tri: Triangulation, centre: Optional[np.ndarray] = None) -> np.ndarray:
         """
         Return the ``[K, J]`` per-axis variance [m^2] of triangulated joints (NaN if none).
 
         noise^2 * mean depth^2 / views (``norm``, normalised units): a joint far from its
-        cameras or seen by few of them is uncertain.
+        cameras or seen by few of them is uncertain. ``centre [K, 3]``: the joints' centroids,
+        if known.
         """
         if not len(tri.joints):
             return np.zeros(tri.joints.shape[:2])
         # depth of each candidate's centre in each camera: the joints of a person are at
         # about the same distance from a camera, compared with the distance itself
-        centre = centroid(tri.joints)                                       # [K, 3]
+        if centre is None:
+            centre = centroid(tri.joints)                                   # [K, 3]
         depth = centre @ self._depth_rows[:, :3].T + self._depth_rows[:, 3]  # [K, C]
         n = tri.num_views
         with np.errstate(invalid='ignore', divide='ignore'):

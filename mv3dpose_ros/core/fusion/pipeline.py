@@ -62,7 +62,7 @@ from mv3dpose_ros.core.fusion.views import (SAME_INSTANT_S, VIEW_PAIR_S, VIEW_SC
 from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.geometry.triangulation import Triangulation
 from mv3dpose_ros.core.skeleton import get_layout, Layout
-from mv3dpose_ros.core.tracking.tracker import Tracker
+from mv3dpose_ros.core.tracking.tracker import Tracker, TrackUpdate
 from mv3dpose_ros.core.types import Stamp, Track
 import numpy as np
 
@@ -134,21 +134,23 @@ class Fusion:
         tombs = self._check_time(at)
         s = self._last = self._reconstruction.run(views, at)
         self._noise.fold(s.tri)
-        s.variance = self._noise.variance(s.tri)
+        s.variance = self._noise.variance(s.tri, s.centres)
         merged = self._duplicates.merge()
         tr = self.tracker.tracks
         lost = tr.ids[at.s - tr.last_observed > self.config.publish_coast_s + 1e-9]
         s.update = self.tracker.update(s.tri.joints, at, lambda rows: self._can_birth(s, rows),
                                        s.variance, lambda rows: self._strong(s, rows),
                                        cameras=s.members >= 0, sparse=s.sparse)
-        s.track_members = _track_members(s.members, s.update.detection)
-        self._views.note(s)
-        if self.config.view_updates and len(self.tracker.tracks):
-            s.rays = self._views.update_set(s)
+        s.track_members = _track_members(s.members, s.update)
+        s.track_seen = s.track_members >= 0
+        if self.config.view_updates:
+            self._views.note(s)
+            if len(self.tracker.tracks):
+                s.rays = self._views.update_set(s)
         if len(lost):
             tr = self.tracker.tracks
             back = tr.ids[tr.last_observed == at.s]
-            self.counts['recovered'] += int(np.isin(back, lost).sum())
+            self.counts['recovered'] += len(set(back.tolist()).intersection(lost.tolist()))
         out = self._assembly.tracks(s)
         self._duplicates.count(s)
         if merged is not None:
@@ -285,8 +287,11 @@ class Fusion:
             _LOG.warning('Fusion: %s', message)
 
 
-def _track_members(members: np.ndarray, detection: np.ndarray) -> np.ndarray:
+def _track_members(members: np.ndarray, update: TrackUpdate) -> np.ndarray:
     """Return ``[T, C]``: the members of the candidate each track took (-1: none)."""
+    detection = update.detection
+    if update.complete:
+        return members.take(detection, axis=0)
     out = np.full((len(detection), members.shape[1]), -1)
     has = detection >= 0
     if has.any():

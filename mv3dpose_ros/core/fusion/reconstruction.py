@@ -128,7 +128,7 @@ class Reconstruction:
         cfg = self.config
         names = self.rig.names
         present = np.array([n in views for n in names])
-        sparse = any(views.get(n) is None for n in names)
+        sparse = bool([n for n in names if views.get(n) is None])
         pts = self.points(views)
         num_n = pts.count
         members = associate_stacked(pts.x[:num_n], pts.offsets, self.rig.essentials,
@@ -140,17 +140,18 @@ class Reconstruction:
                                     order=self.rig.order)
         info: Dict[str, int] = {
             'poses_2d': num_n,
-            'views_with_poses': sum(hi > lo for lo, hi in zip(pts.offsets, pts.offsets[1:])),
+            'views_with_poses': len(set(pts.offsets)) - 1,     # offsets never decrease
             'candidates': len(members)}
         found = self._triangulate(pts, members)
-        merged = 0
+        merged, centres = 0, None
         if len(found.members) > 1 and cfg.merge_distance_m > 0:
-            members, merged = self._merge(found.tri, found.members)
+            centres = centroid(found.tri.joints)
+            members, merged = self._merge(found.tri, found.members, centres)
             if merged:
-                found = self._triangulate(pts, members)
+                found, centres = self._triangulate(pts, members), None
         info.update(swapped_pairs=found.swaps, merged=merged, poses_3d=len(found.members))
         return SetRecord(stamp=stamp, present=present, sparse=sparse, points=pts,
-                         tri=found.tri, members=found.members, info=info)
+                         tri=found.tri, members=found.members, info=info, centres=centres)
 
     def _triangulate(self, pts: Points, members: np.ndarray) -> _Candidates:
         """Triangulate candidates, fix swaps, check bones, drop thin candidates."""
@@ -201,11 +202,11 @@ class Reconstruction:
             refs.append(first + [-1] * (width - len(first)))
         return np.array(refs, dtype=int).reshape(-1, width).T
 
-    def _merge(self, tri: Triangulation, members: np.ndarray) -> Tuple[np.ndarray, int]:
+    def _merge(self, tri: Triangulation, members: np.ndarray, centre: np.ndarray
+               ) -> Tuple[np.ndarray, int]:
         """Merge candidates closer than merge_distance_m seen by disjoint cameras; else NMS."""
         cfg = self.config
-        centre = centroid(tri.joints)                 # cheap first: centres far apart
-        d = centre[:, None] - centre[None]
+        d = centre[:, None] - centre[None]            # cheap first: centres far apart
         with np.errstate(invalid='ignore'):
             near = ((d * d).sum(axis=-1) < (cfg.merge_distance_m + CENTRE_MARGIN_M) ** 2) \
                 & upper_triangle(len(centre))

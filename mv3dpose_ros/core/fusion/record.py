@@ -69,13 +69,16 @@ class SetRecord:
     tri: Triangulation              # the K candidate 3D poses
     members: np.ndarray             # [K, C] row of ``points.x`` behind each candidate, -1: none
     info: Dict[str, int] = field(default_factory=dict)    # counts for ``Fusion.last_info``
+    centres: Optional[np.ndarray] = None        # [K, 3] the candidates' joint centroids, when
+    #                                             the reconstruction computed them
     variance: Optional[np.ndarray] = None       # [K, J] per-axis measurement variance [m^2]
     update: Optional[TrackUpdate] = None        # what the tracker did, [T] live tracks
     track_members: Optional[np.ndarray] = None  # [T, C] ``members`` of each live track's 3D
     #                                             pose of this set (-1: none or no pose)
+    track_seen: Optional[np.ndarray] = None     # [T, C] ``track_members >= 0``
     rays: Optional[Rays] = None                 # single-view updates (None: none)
 
     @property
     def track_cameras(self) -> np.ndarray:
         """Return ``[T, C]``: the cameras whose poses went to each live track in this set."""
-        return self.rays.cameras if self.rays is not None else self.track_members >= 0
+        return self.rays.cameras if self.rays is not None else self.track_seen

@@ -48,6 +48,8 @@ VIEW_PAIR_S = 0.5
 VIEW_SCALE_RATIO = 1.4
 
 _TRIANGULATED = np.uint8(JointState.TRIANGULATED)
+# No pose matched a track: (rows, cols, mirrored), as a solve without a feasible pair gives.
+_NO_MATCH = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), np.zeros(0, dtype=bool))
 _TENTATIVE_TRACK = np.int8(TrackState.TENTATIVE)
 
 
@@ -78,9 +80,10 @@ class ViewUpdates:
         if not num_n:
             return None
         upd, stamp, sparse = s.update, s.stamp, s.sparse
+        assigned, from_member = s.track_members, s.track_seen
+        if not sparse and np.count_nonzero(from_member) == num_n:
+            return None                 # a complete set and no pose left over for a track
         has = upd.detection >= 0
-        assigned = s.track_members
-        from_member = assigned >= 0
         used = np.zeros(num_n + 1, dtype=bool)
         used[assigned[from_member]] = True
         free = np.nonzero(~used[:num_n])[0]
@@ -88,23 +91,21 @@ class ViewUpdates:
         # set that misses a camera, where a new person's sets rarely hold two views (in a
         # complete set, a TENTATIVE track no pose matched is more likely a ghost)
         cand = np.nonzero(~has if sparse else (tr.state != _TENTATIVE_TRACK) & ~has)[0]
-        flipped = None
+        flipped, took = None, False
         if len(free) and len(cand):
             assigned, flipped = assigned.copy(), np.zeros(assigned.shape, dtype=bool)
-            pred = self._predicted(stamp.s)
+            pred = self._predicted(stamp.s, cand)
             cams = pts.camera.take(free)
             for c in sorted(set(cams.tolist())):
                 rows_c = free[cams == c]
                 rows, cols, flip = self._match(c, cand, pts.x.take(rows_c, axis=0), stamp.s,
                                                pred)
-                assigned[cand[rows], c] = rows_c[cols]
-                flipped[cand[rows], c] = flip
-            if not sparse and not (assigned > np.where(from_member, assigned, -1)).any():
-                return None             # a complete set and no pose left over took a track
-        elif not sparse:
-            return None                 # a complete set and no pose left over for a track
-        if not (assigned >= 0).any():
-            return None
+                if len(rows):
+                    assigned[cand[rows], c] = rows_c[cols]
+                    flipped[cand[rows], c] = flip
+                    took = True
+        if not (took or sparse and from_member.any()):
+            return None                 # no pose left over took a track, none to complete
         pts4 = pts.x.take(assigned, axis=0)             # [T, C, J, 3]; -1: the missing row
         if flipped is not None and flipped.any():
             pts4[flipped] = pts4[flipped][:, self._mirror]
@@ -179,7 +180,7 @@ class ViewUpdates:
         cand = np.nonzero(tr.state != _TENTATIVE_TRACK)[0]
         if not len(x) or not len(cand):
             return 0
-        rows, cols, flip = self._match(cam, cand, x, stamp.s, self._predicted(stamp.s))
+        rows, cols, flip = self._match(cam, cand, x, stamp.s, self._predicted(stamp.s, cand))
         if not len(rows):
             return 0
         pts = x.take(cols, axis=0)
@@ -199,10 +200,7 @@ class ViewUpdates:
 
     def note(self, s: SetRecord) -> None:
         """Note this set's 3D matches in the tracks' per-camera view times."""
-        rows = np.nonzero(s.update.detection >= 0)[0]
-        if len(rows):
-            vt = self.tracker.tracks.view_time
-            vt[rows] = np.where(s.track_members[rows] >= 0, s.stamp.s, vt[rows])
+        np.copyto(self.tracker.tracks.view_time, s.stamp.s, where=s.track_seen)
 
     def paired(self, rows: np.ndarray, cam: int, stamp: float) -> np.ndarray:
         """
@@ -232,10 +230,10 @@ class ViewUpdates:
         tr = self.tracker.tracks
         return stamp - tr.last_matched <= self.config.view_only_s + 1e-9
 
-    def _predicted(self, stamp: float) -> np.ndarray:
-        """Return the ``[T, J, 3]`` poses of the tracks predicted to ``stamp``."""
+    def _predicted(self, stamp: float, rows: np.ndarray) -> np.ndarray:
+        """Return the ``[N, J, 3]`` poses of tracks ``rows`` predicted to ``stamp``."""
         return self.tracker.tracks.predicted(stamp, self.config.tracking_prediction,
-                                             self.tracker.config.max_predict_s)
+                                             self.tracker.config.max_predict_s, rows)
 
     def _match(self, cam: int, tracks: np.ndarray, poses: np.ndarray, stamp: float,
                predicted: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -247,11 +245,13 @@ class ViewUpdates:
         joints; a mirrored pose (left/right swapped by the detector) is taken when it fits
         ``swap_ratio`` times better. The gate is the 3D tracking gate (grown with the time
         since a 3D pose matched the track) at the track's depth, plus 3 sigma of 2D noise.
-        ``predicted`` are all tracks' poses at ``stamp``. Returns ``(rows into tracks, rows
-        into poses, mirrored)``.
+        ``predicted`` are the poses of ``tracks`` at ``stamp``. Returns ``(rows into
+        tracks, rows into poses, mirrored)``.
         """
         cfg, tr = self.config, self.tracker.tracks
-        pred = predicted[tracks]                                                # [N, J, 3]
+        since = np.maximum(stamp - tr.last_matched[tracks], 0.0)
+        gate_m = cfg.tracking_gate_m + cfg.tracking_gate_growth_mps * since
+        pred = predicted                                                        # [N, J, 3]
         R, centre = self.rig.rotations[cam], self.rig.centres[cam]
         local = (pred - centre) @ R.T                                           # [N, J, 3]
         z = local[..., 2]
@@ -259,13 +259,23 @@ class ViewUpdates:
         with np.errstate(invalid='ignore', divide='ignore'):
             front = z > 0.05
             proj = np.where(front[..., None], local[..., :2] / z[..., None], np.nan)
-            cost = _image_cost(proj, poses[..., :2], cfg.min_shared_joints)     # [N, P]
-            flip = np.zeros(cost.shape, dtype=bool)
             if cfg.swap_check and len(self.layout.flip_pairs):
-                mirrored = _image_cost(proj, poses[:, mirror, :2], cfg.min_shared_joints)
+                # the poses as given and mirrored, in one pass
+                num_p = len(poses)
+                both = _image_cost(proj, np.concatenate((poses[..., :2], poses[:, mirror, :2])),
+                                   cfg.min_shared_joints)                       # [N, 2P]
+                cost, mirrored = both[:, :num_p], both[:, num_p:]
                 flip = mirrored < cfg.swap_ratio * cost
                 cost = np.where(flip, mirrored, cost)
+            else:
+                cost = _image_cost(proj, poses[..., :2], cfg.min_shared_joints)  # [N, P]
+                flip = np.zeros(cost.shape, dtype=bool)
             depth = np.where(front, z, 0.0).sum(axis=1) / front.sum(axis=1)
+        known = np.isfinite(depth)
+        gate = np.where(known, gate_m / np.where(known, depth, 1.0) + 3 * self._noise.norm, -1.0)
+        if not (cost < gate[:, None]).any():
+            return _NO_MATCH                # (the size check below only removes pairs)
+        with np.errstate(invalid='ignore', divide='ignore'):
             # A pose of the right place but the wrong size is another person on the same
             # line of sight (a bystander behind): its spread must match the projection's
             scale = _spread_ratio(proj, np.where(flip[..., None, None], poses[:, mirror, :2],
@@ -273,10 +283,6 @@ class ViewUpdates:
                                   poses[..., :2])
             cost = np.where((scale > 1 / VIEW_SCALE_RATIO) & (scale < VIEW_SCALE_RATIO), cost,
                             np.inf)
-        since = np.maximum(stamp - tr.last_matched[tracks], 0.0)
-        gate_m = cfg.tracking_gate_m + cfg.tracking_gate_growth_mps * since
-        gate = np.where(np.isfinite(depth), gate_m / np.where(np.isfinite(depth), depth, 1.0)
-                        + 3 * self._noise.norm, -1.0)
         rows, cols = gated_assignment(cost, gate[:, None])
         return rows, cols, flip[rows, cols]
 
@@ -299,17 +305,17 @@ def _spread_ratio(proj: np.ndarray, poses: np.ndarray) -> np.ndarray:
     The size is the RMS distance of the joints both have from their mean, so a pose whose
     legs are hidden is compared with the projection's upper body only. NaN with < 2 shared.
     """
-    det = poses if poses.ndim == 4 else np.broadcast_to(poses[None], (len(proj),) + poses.shape)
-    ref = np.broadcast_to(proj[:, None], det.shape)
-    ok = np.isfinite(det[..., 0]) & np.isfinite(ref[..., 0])             # [N, P, J]
+    # both sets of points at once: detected and projected, [2, N, P, J, 2]
+    both = np.empty((2,) + (poses.shape if poses.ndim == 4 else (len(proj),) + poses.shape))
+    both[0] = poses
+    both[1] = proj[:, None]
+    ok = np.isfinite(both[0, ..., 0]) & np.isfinite(both[1, ..., 0])     # [N, P, J]
     n = ok.sum(axis=-1)[..., None]
     with np.errstate(invalid='ignore', divide='ignore'):
-        sizes = []
-        for pts in (det, ref):
-            pts = np.where(ok[..., None], pts, 0.0)
-            centred = pts - pts.sum(axis=-2)[..., None, :] / n[..., None]
-            sizes.append(np.sqrt((np.where(ok[..., None], centred, 0.0) ** 2).sum(axis=(-1, -2))
-                                 / n[..., 0]))
+        pts = np.where(ok[..., None], both, 0.0)
+        centred = pts - pts.sum(axis=-2)[..., None, :] / n[..., None]
+        sizes = np.sqrt((np.where(ok[..., None], centred, 0.0) ** 2).sum(axis=(-1, -2))
+                        / n[..., 0])
         return np.where(n[..., 0] >= 2, sizes[0] / sizes[1], np.nan)
 
 

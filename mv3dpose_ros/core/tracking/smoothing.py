@@ -155,8 +155,9 @@ class JointKalman:
             resid = z - xp
             s = pxx + r
             d2 = (resid * resid) @ _XYZ / s                       # NaN where not observed
-            accept = obs & live & (d2 <= self.gate)
-            rejected = obs & live & ~accept
+            seen = obs & live
+            accept = seen & (d2 <= self.gate)
+            rejected = seen & ~accept
             rejects = np.where(rejected, self.rejects + 1, 0)
             start = obs & (~live | (rejects >= self.reinit_after))
             accept &= ~start
@@ -165,8 +166,9 @@ class JointKalman:
         self.x = np.where(s3, z, np.where(a3, xp + k1[..., None] * resid, self.x))
         held_v = np.where(live[..., None], self.v, 0.0)
         self.v = np.where(s3, 0.0, np.where(a3, self.v + k2[..., None] * resid, held_v))
-        self.p_xx = np.where(start, r, np.where(accept, (1 - k1) * pxx, self.p_xx))
-        self.p_xv = np.where(start, 0.0, np.where(accept, (1 - k1) * pxv, self.p_xv))
+        gain = 1 - k1
+        self.p_xx = np.where(start, r, np.where(accept, gain * pxx, self.p_xx))
+        self.p_xv = np.where(start, 0.0, np.where(accept, gain * pxv, self.p_xv))
         self.p_vv = np.where(start, self.v0, np.where(accept, pvv - k2 * pxv, self.p_vv))
         upd = accept | start
         self.t = np.where(upd, stamp, self.t)
@@ -211,8 +213,8 @@ class JointKalman:
         seen = np.isfinite(direction[..., 0])
         live = (count > 0) & (dt >= -same_instant_s) & (dt <= self.max_gap_s + 1e-9) & seen
         dt = np.where(live, np.maximum(dt, 0.0), 0.0)
-        xp, pxx, pxv, pvv = _predict(self.q, x, v, self.p_xx[rows], self.p_xv[rows],
-                                     self.p_vv[rows], dt)
+        p_xx, p_xv, p_vv = self.p_xx[rows], self.p_xv[rows], self.p_vv[rows]
+        xp, pxx, pxv, pvv = _predict(self.q, x, v, p_xx, p_xv, p_vv, dt)
         with np.errstate(invalid='ignore'):
             w = xp - origin
             depth = (w * direction) @ _XYZ                        # along the ray, [N, J]
@@ -228,9 +230,10 @@ class JointKalman:
         # it there was measured worse: a walking person's depth then lags behind)
         self.v[rows] = np.where(a3, v + k2[..., None] * resid, v)
         two_thirds = 2.0 / 3.0
-        self.p_xx[rows] = np.where(accept, pxx * (1 - two_thirds * k1), self.p_xx[rows])
-        self.p_xv[rows] = np.where(accept, pxv * (1 - two_thirds * k1), self.p_xv[rows])
-        self.p_vv[rows] = np.where(accept, pvv - two_thirds * k2 * pxv, self.p_vv[rows])
+        shrink = 1 - two_thirds * k1
+        self.p_xx[rows] = np.where(accept, pxx * shrink, p_xx)
+        self.p_xv[rows] = np.where(accept, pxv * shrink, p_xv)
+        self.p_vv[rows] = np.where(accept, pvv - two_thirds * k2 * pxv, p_vv)
         self.t[rows] = np.where(accept, np.maximum(stamp, t), t)
         self.count[rows] = np.where(accept, count + 1, count)
         point = np.where(a3, xp + resid, np.nan)

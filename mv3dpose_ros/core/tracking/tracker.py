@@ -51,7 +51,7 @@ operations whatever the number of people.
 """
 
 from dataclasses import dataclass, fields
-from typing import Callable, Optional, Union
+from typing import Callable, Optional, Tuple, Union
 
 from mv3dpose_ros.core.assignment import gated_assignment
 from mv3dpose_ros.core.tracking.smoothing import JointKalman, KalmanUpdate
@@ -139,27 +139,34 @@ class Tracks:
 
     def take(self, rows: np.ndarray) -> 'Tracks':
         """Return the tracks ``rows`` (index or mask) as a new ``Tracks``."""
-        return Tracks(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
+        return Tracks(**{n: getattr(self, n)[rows] for n in _TRACK_FIELDS})
 
     def concat(self, other: 'Tracks') -> 'Tracks':
         """Return these tracks followed by ``other``."""
-        return Tracks(**{f.name: np.concatenate((getattr(self, f.name), getattr(other, f.name)))
-                         for f in fields(self)})
+        return Tracks(**{n: np.concatenate((getattr(self, n), getattr(other, n)))
+                         for n in _TRACK_FIELDS})
 
-    def predicted(self, stamp: float, predict: bool = True,
-                  horizon_s: float = np.inf) -> np.ndarray:
+    def predicted(self, stamp: float, predict: bool = True, horizon_s: float = np.inf,
+                  rows: Optional[np.ndarray] = None) -> np.ndarray:
         """
         Return ``[T, J, 3]`` poses moved by their velocity to ``stamp`` (when known).
 
         At most ``horizon_s`` of motion is extrapolated: a velocity says little about where
         a person lost for seconds went (the tracking gate grows with the time instead).
+        ``rows``: only those tracks' poses, ``[N, J, 3]``.
         """
-        if not predict or not len(self):
-            return self.pose
-        velocity = np.where(np.isnan(self.velocity), 0.0, self.velocity)     # unknown: stay
-        elapsed = np.clip(stamp - self.last_observed, -horizon_s, horizon_s)
+        pose, velocity, seen = self.pose, self.velocity, self.last_observed
+        if rows is not None:
+            pose, velocity, seen = pose[rows], velocity[rows], seen[rows]
+        if not predict or not len(pose):
+            return pose
+        velocity = np.where(np.isnan(velocity), 0.0, velocity)               # unknown: stay
+        elapsed = np.minimum(np.maximum(stamp - seen, -horizon_s), horizon_s)
         shift = velocity * elapsed[:, None]
-        return self.pose + shift[:, None, :]
+        return pose + shift[:, None, :]
+
+
+_TRACK_FIELDS = tuple(f.name for f in fields(Tracks))
 
 
 @dataclass
@@ -170,6 +177,9 @@ class TrackUpdate:
     previous: np.ndarray    # [T] row of the track before the update, -1 = born now
     deleted: Tracks         # tracks deleted in this update (state DELETED), reported once
     filtered: KalmanUpdate  # the joint filters' estimates at this stamp, [T, J] rows
+    measurement: np.ndarray             # [T, J, 3] the pose each track took (NaN: none)
+    measurement_variance: np.ndarray    # [T, J] its per-axis variance [m^2] (NaN: none)
+    complete: bool = False              # every live track took a pose
 
 
 def centroid(poses: np.ndarray) -> np.ndarray:
@@ -217,7 +227,8 @@ def median_joint_distance(a: np.ndarray, b: np.ndarray, min_shared_joints: int =
     n = ok.sum(axis=-1)
     ordered = np.sort(np.where(ok, diff, np.inf), axis=-1)          # missing joints last
     middle = np.maximum(n - 1, 0) // 2                              # the lower median
-    med = np.take_along_axis(ordered, middle[..., None], axis=-1)[..., 0]
+    flat = ordered.reshape(-1, ordered.shape[-1])                   # (take_along_axis is slow)
+    med = flat[np.arange(len(flat)), middle.ravel()].reshape(middle.shape)
     return np.where(n >= min_shared_joints, med, np.inf)
 
 
@@ -232,6 +243,9 @@ class Tracker:
         self.num_cameras = int(num_cameras)
         self.next_id = 1
         self._stamp: Optional[float] = None     # stamp of the last update
+        self._none = Tracks.empty(self.num_joints, self.num_cameras)    # (read-only)
+        for name in _TRACK_FIELDS:
+            getattr(self._none, name).setflags(write=False)
         self._clear()
 
     def _clear(self) -> None:
@@ -293,40 +307,44 @@ class Tracker:
             # a fresh track follows.
             recent = unseen <= cfg.lost_after_s + 1e-9
             lost = alive & ~recent
-            passes = [(alive & recent, gate, 0), (alive & recent, wide, 1)]
+            fresh = alive & recent
+            passes = [(fresh, gate, 0), (fresh, wide, 1)]
             if lost.any():
                 passes += [(lost, gate, 2), (lost, wide, 2)]
-            taken = np.zeros(num_d, dtype=bool)
+            taken, matched = np.zeros(num_d, dtype=bool), 0      # matched: taken.sum()
             for group, limit, second in passes:
                 if limit is None:
                     continue
                 free_t = np.nonzero(group & (det < 0))[0]
-                if not len(free_t) or taken.all():
+                if not len(free_t) or matched == num_d:
                     continue
-                if len(free_t) == num_t and not taken.any():
+                if len(free_t) == num_t and not matched:
                     rows, cols = gated_assignment(cost, limit[:, None])
                     rows, cols = free_t[rows], cols
                 else:
                     free_d = np.nonzero(~taken)[0]
-                    r, c = gated_assignment(cost[np.ix_(free_t, free_d)], limit[free_t, None])
+                    r, c = gated_assignment(cost.take(free_t, axis=0).take(free_d, axis=1),
+                                            limit[free_t, None])
                     rows, cols = free_t[r], free_d[c]
                 det[rows] = cols
                 taken[cols] = True
                 recovered[rows] = second
+                matched += len(rows)
+                if matched == min(num_t, num_d):
+                    break                   # every track, or every pose, is taken
         hit = det >= 0
         all_hit = bool(hit.all())
         if num_t:
             now = None
             if num_d and cameras is not None:
-                now = cameras[np.maximum(det, 0)] & hit[:, None]
+                now = cameras[det] if all_hit else cameras[np.maximum(det, 0)] & hit[:, None]
             # this set's confirmations count its pose's cameras and the earlier ones', each
             # on its own; the union counts from the next observation on
             self._observe(hit, at, all_hit, now)
             if now is not None:
                 tr.cameras = tr.cameras | now
         if all_hit:                                 # the common case: nobody missed
-            deleted, kept, live = (Tracks.empty(self.num_joints, self.num_cameras),
-                                   np.arange(num_t), tr)
+            deleted, kept, live = self._none, np.arange(num_t), tr
         else:
             tentative = tr.state == _TENTATIVE
             wait = ~tentative | (sparse & (unseen <= cfg.tentative_coast_s + 1e-9))
@@ -334,11 +352,14 @@ class Tracker:
             keep = hit | coast
             tr.missed = np.where(hit, 0, tr.missed + 1)
             tr.state = np.where(coast & ~tentative, _COASTING, tr.state)
-            deleted = tr.take(~keep)
-            deleted.state[:] = TrackState.DELETED
-            kept = np.nonzero(keep)[0]
-            live = tr.take(kept)
-            recovered = recovered[kept]
+            if keep.all():                          # the next: those who missed coast
+                deleted, kept, live = self._none, np.arange(num_t), tr
+            else:
+                deleted = tr.take(~keep)
+                deleted.state[:] = TrackState.DELETED
+                kept = np.nonzero(keep)[0]
+                live = tr.take(kept)
+                recovered = recovered[kept]
         new = _NONE
         matched = det[hit]
         if len(matched) < num_d:                    # else every pose continues a track
@@ -358,17 +379,21 @@ class Tracker:
             previous = np.concatenate((kept, np.full(len(new), -1)))
             recovered = np.concatenate((recovered, np.zeros(len(new), dtype=np.int8)))
         self.tracks = live
-        filtered = self._filter(poses, variance, det, previous, stamp, recovered)
+        complete = bool((det >= 0).all())
+        filtered, z, r = self._filter(poses, variance, det, previous, stamp, recovered,
+                                      complete)
         return TrackUpdate(detection=det, previous=previous, deleted=deleted,
-                           filtered=filtered)
+                           filtered=filtered, measurement=z, measurement_variance=r,
+                           complete=complete)
 
     def _filter(self, poses: np.ndarray, variance: Optional[np.ndarray], det: np.ndarray,
-                previous: np.ndarray, stamp: float, recovered: np.ndarray) -> KalmanUpdate:
+                previous: np.ndarray, stamp: float, recovered: np.ndarray, complete: bool
+                ) -> Tuple[KalmanUpdate, np.ndarray, np.ndarray]:
         """Run the joint filters of the live tracks; set their pose and body velocity."""
         cfg, tr, num_j = self.config, self.tracks, self.num_joints
         if variance is None:
             variance = np.full(poses.shape[:2], cfg.measurement_std_m ** 2)
-        if len(det) and (det >= 0).all():
+        if len(det) and complete:           # (complete: every track took a pose)
             z, r = poses.take(det, axis=0), variance.take(det, axis=0)
         else:                            # row D of the padded arrays is "not observed"
             z = np.concatenate((poses, np.full((1, num_j, 3), np.nan))).take(det, axis=0)
@@ -384,7 +409,7 @@ class Tracker:
             velocity = np.where((recovered == 1)[:, None], tr.velocity, velocity)
             velocity = np.where((recovered == 2)[:, None], np.nan, velocity)
         tr.velocity = velocity
-        return out
+        return out, z, r
 
     def observe_views(self, rows: np.ndarray, stamp: Stamp,
                       located: Optional[np.ndarray] = None) -> None:
@@ -503,6 +528,8 @@ class Tracker:
             tr.last_observed = np.where(hit, stamp, tr.last_observed)
             tr.last_observed_ns = np.where(hit, stamp_ns, tr.last_observed_ns)
             tr.last_matched = np.where(hit, stamp, tr.last_matched)
+        if (tr.state == _CONFIRMED).all():
+            return                          # the steady state: nothing left to confirm
         count = tr.cameras.sum(axis=1)
         if cameras is not None:
             count = np.maximum(count, cameras.sum(axis=1))
