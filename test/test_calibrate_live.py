@@ -20,7 +20,7 @@ The Pose2Sim single-person videos are published as in ``test_live_video_rig`` (1
 camera at the origin, unrotated. ``mv3dpose_bringup --rig $INTRINSICS --calibrate ...
 --save-rig rig.yaml`` records the pose2d nodes, calibrates, then starts fusion_node on the
 new rig. Asserted: the saved rig has the 4 cameras, within a few degrees and centimetres of the
-Qualisys calibration after a similarity (``core.selfcal.frame``), its scale within 15 %, and a
+Qualisys calibration after a similarity (``core.selfcal.frame``), its scale within 10 %, and a
 confirmed track on ``/fusion_node/tracks`` within the run's bound. The figures are printed.
 """
 
@@ -42,7 +42,7 @@ CAMERAS = ('cam_01', 'cam_02', 'cam_03', 'cam_04')
 RUN_TIMEOUT_S = 170.0        # start to the first confirmed track on the calibrated rig
 MEAN_DEG, WORST_DEG = 3.0, 5.0
 MEAN_CM, WORST_CM = 15.0, 25.0
-SCALE_TOLERANCE = 0.15
+SCALE_TOLERANCE = 0.10       # measured 0.941 and 0.944 (1.70 m prior, COCO-17, one person)
 
 
 def intrinsics_only(calibration: str, path: str) -> None:

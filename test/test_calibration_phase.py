@@ -79,6 +79,9 @@ def test_calibrate_needs_save_rig_and_plans_the_pose2d_nodes_first(rig, tmp_path
     assert names == ['pose2d_node[cam_a]', 'pose2d_node[cam_b]']    # fusion_node after
     assert 'input_size: 640x384' in res.stdout
     assert 'mv3dpose calibrate -o' in res.stdout
+    res = bringup('--rig', rig, '--calibrate', '--save-rig', str(tmp_path / 'rig.yaml'),
+                  '--dry-run')       # by default the largest input at a lower rate
+    assert 'min_input_side: 640' in res.stdout and 'inference_rate_hz: 5.0' in res.stdout
 
 
 def test_recorded_topics_are_each_cameras_persons_and_camera_info():

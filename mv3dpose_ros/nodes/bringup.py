@@ -46,6 +46,8 @@ Names: ``{camera}`` in ``--namespace`` and ``--image-topic`` is the camera's ROS
 (``ros/names.py``: ``00_03`` -> ``cam00_03``); both are validated before anything starts. The
 children get the Fast DDS profile ``config/fastdds_shm.xml`` (HD images over shared memory)
 unless ``FASTRTPS_DEFAULT_PROFILES_FILE`` or ``--dds-profile`` says otherwise.
+``--calibrate`` starts the pose2d nodes alone, calibrates the rig from the people into
+``--save-rig`` (``nodes/calibration_phase.py``), then starts fusion_node on it.
 """
 
 import argparse
@@ -75,6 +77,9 @@ PROFILE_VARS = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE
 RESPAWN_DELAY_S = 1.0
 RESPAWN_MAX_DELAY_S = 30.0
 RESPAWN_STABLE_S = 30.0
+#: --calibrate: pose2d settings of the calibration phase (keypoint quality over latency: on a
+#: 2-core host the auto size is the smallest; measured in docs/calibrate.md)
+CALIBRATE_POSE2D = ('model.min_input_side:=640', 'inference_rate_hz:=5.0')
 
 
 def _executable(spec: ProcessSpec) -> List[str]:
@@ -316,8 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
                    ' record again this many times in all while data is missing (default 3)')
     p.add_argument('--calibrate-pose2d-param', action='append', metavar='NAME:=VALUE',
                    help='--calibrate: a pose2d_node parameter for the calibration phase only '
-                   '(e.g. model.input_size:=640x384); the nodes restart with the tracking '
-                   'settings after')
+                   '(repeatable; given ones replace the default '
+                   f'{" ".join(CALIBRATE_POSE2D)}: the largest input at a lower rate); the '
+                   'nodes restart with the tracking settings after')
     p.add_argument('--use-sim-time', action='store_true', help='use_sim_time for all nodes')
     p.add_argument('--no-pose2d', action='store_true', help='start fusion_node only (2D poses '
                    'come from elsewhere, e.g. a bag or other hosts)')
@@ -346,6 +352,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         parser.error('--no-pose2d and --no-fusion together start nothing')
     if args.calibrate and (not args.save_rig or args.no_pose2d or args.no_fusion):
         parser.error('--calibrate needs --save-rig RIG and both the pose2d and fusion nodes')
+    if args.calibrate_pose2d_param is None:
+        args.calibrate_pose2d_param = list(CALIBRATE_POSE2D)
     restart = bool(args.calibrate and args.calibrate_pose2d_param)
     track = argparse.Namespace(**{**vars(args), 'rig': args.save_rig, 'no_pose2d': not restart})
     if args.calibrate:              # the pose2d nodes first, fusion_node on the new rig after
