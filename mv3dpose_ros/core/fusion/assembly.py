@@ -29,7 +29,7 @@ from typing import List, Optional, Tuple
 from mv3dpose_ros.core.fusion.config import FusionConfig
 from mv3dpose_ros.core.fusion.record import SetRecord
 from mv3dpose_ros.core.skeleton import Layout
-from mv3dpose_ros.core.tracking.tracker import centroid, Tracker, Tracks
+from mv3dpose_ros.core.tracking.tracker import centroid, filled, padded, Tracker, Tracks
 from mv3dpose_ros.core.types import JointState, PositionSource, Track, TrackState
 import numpy as np
 
@@ -69,10 +69,9 @@ class TrackAssembly:
             conf_obs = tri.confidence.take(det, axis=0)
             num_views, err = tri.num_views.take(det, axis=0), tri.error_px.take(det, axis=0)
         else:                            # row K of the padded arrays is "not observed"
-            conf_obs = np.concatenate((tri.confidence, np.zeros((1, num_j)))).take(det, axis=0)
-            num_views = np.concatenate((tri.num_views, np.zeros((1, num_j), int))
-                                       ).take(det, axis=0)
-            err = np.concatenate((tri.error_px, np.full((1, num_j), np.nan))).take(det, axis=0)
+            conf_obs = padded(tri.confidence, 0.0).take(det, axis=0)
+            num_views = padded(tri.num_views, 0).take(det, axis=0)
+            err = padded(tri.error_px, np.nan).take(det, axis=0)
         accepted = kal.accepted
         every = bool(accepted.all())
         if not every:                    # a rejected observation is not an observation
@@ -108,7 +107,7 @@ class TrackAssembly:
         missing = state == _MISSING
         confidence = np.where(missing, 0.0, np.where(state == _PREDICTED, 0.5, 1.0) * conf_last)
         velocity = tr.velocity
-        source = np.full(num_t, int(PositionSource.HIPS), dtype=np.uint8)
+        source = filled(num_t, int(PositionSource.HIPS), np.uint8)
         if self._root is None:
             position, cov = np.full((num_t, 3), np.nan), np.full((num_t, 3, 3), np.nan)
         else:

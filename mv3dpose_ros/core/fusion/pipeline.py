@@ -62,7 +62,7 @@ from mv3dpose_ros.core.fusion.views import (SAME_INSTANT_S, VIEW_PAIR_S, VIEW_SC
 from mv3dpose_ros.core.geometry.camera import Camera
 from mv3dpose_ros.core.geometry.triangulation import Triangulation
 from mv3dpose_ros.core.skeleton import get_layout, Layout
-from mv3dpose_ros.core.tracking.tracker import Tracker, TrackUpdate
+from mv3dpose_ros.core.tracking.tracker import filled, Tracker, TrackUpdate
 from mv3dpose_ros.core.types import Stamp, Track
 import numpy as np
 
@@ -292,7 +292,7 @@ def _track_members(members: np.ndarray, update: TrackUpdate) -> np.ndarray:
     detection = update.detection
     if update.complete:
         return members.take(detection, axis=0)
-    out = np.full((len(detection), members.shape[1]), -1)
+    out = filled((len(detection), members.shape[1]), -1, int)
     has = detection >= 0
     if has.any():
         out[has] = members[detection[has]]

@@ -182,6 +182,21 @@ class TrackUpdate:
     complete: bool = False              # every live track took a pose
 
 
+def filled(shape, value, dtype=float) -> np.ndarray:
+    """Return ``np.full(shape, value, dtype)`` for a step's few-element arrays (4x cheaper)."""
+    out = np.empty(shape, dtype)
+    out.fill(value)
+    return out
+
+
+def padded(a: np.ndarray, value) -> np.ndarray:
+    """Return ``a`` with one more row of ``value`` (row -1 of an index table: "none")."""
+    out = np.empty((len(a) + 1,) + a.shape[1:], a.dtype)
+    out[:-1] = a
+    out[-1] = value
+    return out
+
+
 def centroid(poses: np.ndarray) -> np.ndarray:
     """Return the ``[..., 3]`` mean of the finite joints of ``[..., J, 3]`` poses (NaN if none)."""
     ok = np.isfinite(poses[..., 0])
@@ -289,7 +304,7 @@ class Tracker:
         self._stamp = stamp
         tr = self.tracks
         num_t, num_d = len(tr), len(poses)
-        det = np.full(num_t, -1)
+        det = filled(num_t, -1, int)
         recovered = np.zeros(num_t, dtype=np.int8)   # 1: recovery gate, 2: was lost
         unseen = np.maximum(stamp - tr.last_observed, 0.0)
         alive = unseen <= cfg.max_coast_s + 1e-9        # expired tracks take no part at all
@@ -390,14 +405,14 @@ class Tracker:
                 previous: np.ndarray, stamp: float, recovered: np.ndarray, complete: bool
                 ) -> Tuple[KalmanUpdate, np.ndarray, np.ndarray]:
         """Run the joint filters of the live tracks; set their pose and body velocity."""
-        cfg, tr, num_j = self.config, self.tracks, self.num_joints
+        cfg, tr = self.config, self.tracks
         if variance is None:
             variance = np.full(poses.shape[:2], cfg.measurement_std_m ** 2)
         if len(det) and complete:           # (complete: every track took a pose)
             z, r = poses.take(det, axis=0), variance.take(det, axis=0)
         else:                            # row D of the padded arrays is "not observed"
-            z = np.concatenate((poses, np.full((1, num_j, 3), np.nan))).take(det, axis=0)
-            r = np.concatenate((variance, np.full((1, num_j), np.nan))).take(det, axis=0)
+            z = padded(poses, np.nan).take(det, axis=0)
+            r = padded(variance, np.nan).take(det, axis=0)
         self.filter.reindex(previous)
         out = self.filter.update(z, r, stamp)
         known = self.filter.count > 0
@@ -519,9 +534,10 @@ class Tracker:
         tr = self.tracks
         if all_hit:
             tr.hits = tr.hits + 1
-            tr.last_observed = np.full(len(tr), stamp)
-            tr.last_observed_ns = np.full(len(tr), stamp_ns, dtype=np.int64)
-            tr.last_matched = np.full(len(tr), stamp)
+            num_t = len(tr.ids)
+            tr.last_observed = filled(num_t, stamp)
+            tr.last_observed_ns = filled(num_t, stamp_ns, np.int64)
+            tr.last_matched = filled(num_t, stamp)
             tr.missed = np.zeros(len(tr), dtype=np.int64)
         else:
             tr.hits = tr.hits + hit
