@@ -39,7 +39,9 @@ from test_live_rig import readme_block
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NS = 1_000_000_000
 CAMERAS = ('cam_01', 'cam_02', 'cam_03', 'cam_04')
-RUN_TIMEOUT_S = 170.0        # start to the first confirmed track on the calibrated rig
+RUN_TIMEOUT_S = 240.0        # start to the first confirmed track on the calibrated rig: 71-139 s
+#                              in one attempt here, 168 s to the rig when a loaded host's first
+#                              30 s were too few (the phase records again)
 MEAN_DEG, WORST_DEG = 3.0, 5.0
 MEAN_CM, WORST_CM = 15.0, 25.0
 SCALE_TOLERANCE = 0.10       # measured 0.941 and 0.944 (1.70 m prior, COCO-17, one person)
@@ -63,7 +65,7 @@ def test_readme_intrinsics_recipe_calibrates_then_tracks():
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.timeout(300)
+@pytest.mark.timeout(330)
 def test_intrinsics_only_rig_calibrates_and_tracks(shared_data, model, tmp_path):
     videos = os.path.join(shared_data, 'pose2sim_singleperson', 'videos')
     qualisys = os.path.join(shared_data, 'pose2sim_multiperson', 'Calib_qualisys.toml')
