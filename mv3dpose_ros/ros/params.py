@@ -75,7 +75,7 @@ def field_comments(cls: type) -> Dict[str, str]:
     Return ``{field: trailing comment}`` from the source of a dataclass (empty if absent).
 
     A comment continues on the following comment-only lines whose text is indented by two or
-    more spaces after the ``#`` (aligned under the first line), as in ``core.fusion.pipeline``.
+    more spaces after the ``#`` (aligned under the first line), as in ``core.fusion.config``.
     """
     try:
         source = inspect.getsource(cls)
