@@ -304,3 +304,24 @@ def test_no_core_class_over_400_lines_or_20_attributes():
                 found.append(f'{os.path.relpath(path, ROOT)}:{node.lineno}: {node.name} has '
                              f'{lines} lines and {attributes} instance attributes')
     assert not found, '\n'.join(found)
+
+
+def test_tests_and_benches_reach_the_package_through_public_names():
+    """Tests and benches observe what users observe: no ``_private`` name of the package."""
+    found = []
+    for where in ('test', 'bench'):
+        for name in sorted(os.listdir(os.path.join(ROOT, where))):
+            if not name.endswith('.py'):
+                continue
+            path = os.path.join(ROOT, where, name)
+            for node in ast.walk(ast.parse(open(path).read(), path)):
+                if isinstance(node, ast.ImportFrom) and (node.module or '').startswith(
+                        'mv3dpose_ros'):
+                    found += [f'{where}/{name}:{node.lineno} imports {a.name}'
+                              for a in node.names if a.name.startswith('_')
+                              and not a.name.startswith('__')]
+                elif isinstance(node, ast.Attribute) and node.attr.startswith('_') and \
+                        not node.attr.startswith('__') and node.attr not in (
+                            '_exit', '_getframe', '_replace', '_asdict', '_fields', '_make'):
+                    found.append(f'{where}/{name}:{node.lineno} reads .{node.attr}')
+    assert len(found) <= 10, '\n'.join(found)
