@@ -90,7 +90,7 @@ except ImportError:     # LOCAL until eval's identity metrics land: replace with
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..',
                     'shared', 'data')
-# The core API of issue 25 may not have landed yet: run only the set-based path until it has.
+# Older trees (A/B runs) may lack single-view updates: then only the set-based path runs.
 VIEW_UPDATES = 'view_updates' in {f.name for f in dataclasses.fields(FusionConfig)}
 UPDATE_VIEW = hasattr(Fusion, 'update_view')
 PANOPTIC_CAMS = ['00_03', '00_06', '00_12', '00_13', '00_23', '00_00', '00_09', '00_16',

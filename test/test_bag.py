@@ -192,7 +192,7 @@ def _payload_corruptions(good, storage, count, seed):
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_payload_corruption_is_detected_naming_file_and_chunk(tmp_path, storage):
-    """Issue 11 defect 7: bags carry CRCs; a changed payload byte is an error, never values."""
+    """Bags carry CRCs: a changed payload byte is an error, never wrong values."""
     good = tmp_path / 'good'
     _write_bag(good, storage=storage, n=40)
     if storage == 'mcap':
@@ -223,7 +223,7 @@ def test_payload_corruption_is_detected_naming_file_and_chunk(tmp_path, storage)
 
 
 def test_overwrite_replaces_only_a_bag(tmp_path):
-    """Issue 11 defect 9: --overwrite refused a folder of sources only after deleting it."""
+    """--overwrite refuses a folder holding the sources before deleting anything."""
     src = tmp_path / 'src'
     src.mkdir()
     (src / 'main.py').write_text('print(1)\n')
@@ -252,7 +252,7 @@ def test_overwrite_replaces_only_a_bag(tmp_path):
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_checkpointed_partial_bag_is_salvaged(tmp_path, storage):
-    """A writer that dies after a checkpoint keeps everything before it (issue 11 defect 8)."""
+    """A writer that dies after a checkpoint keeps everything before it."""
     from mv3dpose_ros.commands.bag import recover
     ts = get_typestore()
     string = ts.types['std_msgs/msg/String']

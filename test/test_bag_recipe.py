@@ -50,7 +50,7 @@ def test_readme_bag_recipe_as_typed_gives_the_three_people(shared_data, model, t
                              timeout=540)
     text = (tmp_path / 'recipe.log').read_text()
     assert run.returncode == 0, text[-4000:]
-    # the recorder's own partial folder is no interrupted recording (issue 32)
+    # the recorder's own partial folder is no interrupted recording
     assert 'interrupted recording' not in text, text[-4000:]
     frames = list(tracks_from_bag(str(tmp_path / 'run.bag')))
     assert frames, text[-4000:]
