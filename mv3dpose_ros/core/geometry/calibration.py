@@ -314,17 +314,23 @@ def rig_yaml_dict(cameras: Mapping[str, Camera], world_frame: str = 'world') -> 
     return out
 
 
-def save_rig_yaml(cameras: Mapping[str, Camera], path: str, world_frame: str = 'world',
-                  comment: Optional[str] = None) -> None:
-    """Write ``cameras`` as a rig YAML that ``load_calibration`` reads back (round trip)."""
+def rig_yaml_text(cameras: Mapping[str, Camera], world_frame: str = 'world',
+                  comment: Optional[str] = None) -> str:
+    """Return the rig YAML of ``cameras`` as text, ``comment`` lines first (``# ...``)."""
     header = ''
     if comment:
         header = ''.join(f'# {line}\n' for line in comment.splitlines())
-    text = yaml.safe_dump(rig_yaml_dict(cameras, world_frame), sort_keys=False,
-                          default_flow_style=None, width=100)
+    return header + yaml.safe_dump(rig_yaml_dict(cameras, world_frame), sort_keys=False,
+                                   default_flow_style=None, width=100)
+
+
+def save_rig_yaml(cameras: Mapping[str, Camera], path: str, world_frame: str = 'world',
+                  comment: Optional[str] = None) -> None:
+    """Write ``cameras`` as a rig YAML that ``load_calibration`` reads back (round trip)."""
+    text = rig_yaml_text(cameras, world_frame, comment)
     with atomic_path(path) as tmp:
         with open(tmp, 'w', encoding='utf-8') as f:
-            f.write(header + text)
+            f.write(text)
 
 
 # ---------------------------------------------------------------------------- Panoptic

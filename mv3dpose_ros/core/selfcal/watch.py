@@ -483,9 +483,7 @@ class CalibrationWatch:
     def _support_px(self, x: np.ndarray, u: np.ndarray, v: np.ndarray,
                     others: np.ndarray) -> np.ndarray:
         """Return ``[K, J]``: each point's worst reprojection (px) in the views that made it."""
-        ru, rv, depth = reproject(x, self._projections)
-        focal = np.array([self.cameras[n].focal for n in self.names])[:, None, None]
-        err = np.where(depth > 0, np.hypot(ru - u, rv - v) * focal, np.inf)
+        err = self._view_errors_px(x, u, v)
         return np.where(others > 0, err, 0.0).max(axis=0)
 
     # ------------------------------------------------------------------ judging

@@ -24,10 +24,9 @@ static transforms.
 
 from typing import Any, Mapping, Sequence
 
-from mv3dpose_ros.core.geometry.calibration import rig_yaml_dict, save_rig_yaml
+from mv3dpose_ros.core.geometry.calibration import rig_yaml_text, save_rig_yaml
 from mv3dpose_ros.ros.qos import latched_qos
 from std_msgs.msg import String
-import yaml
 
 
 class RigOutput:
@@ -43,9 +42,7 @@ class RigOutput:
     def publish(self, cameras: Mapping[str, Any], why: str) -> None:
         """Send ``cameras`` (every camera of the rig in use) everywhere it goes."""
         rig = {c: cameras[c] for c in self.camera_ids}
-        text = yaml.safe_dump(rig_yaml_dict(rig, self.world_frame), sort_keys=False,
-                              default_flow_style=None, width=100)
-        self.publisher.publish(String(data=f'# {why}\n{text}'))
+        self.publisher.publish(String(data=rig_yaml_text(rig, self.world_frame, why)))
         self.changes += 1
         if self.changes > 1:
             self.tf.republish_cameras(rig, self.camera_ids, self.node.get_clock().now().to_msg())
